@@ -1,0 +1,28 @@
+# Decides whether the CUDA backend is built (EMFUSION_CUDA = AUTO | ON | OFF)
+# and, if so, enables the CUDA language with the project's defaults.
+include(CheckLanguage)
+set(EMFUSION_WITH_CUDA OFF)
+if(NOT EMFUSION_CUDA STREQUAL "OFF")
+  check_language(CUDA)
+  if(CMAKE_CUDA_COMPILER)
+    if(NOT DEFINED CMAKE_CUDA_ARCHITECTURES)
+      # Build for the GPU in this machine when there is one; otherwise for
+      # Hopper (the project's GPU machines), so that CI can compile without one.
+      execute_process(COMMAND nvidia-smi -L RESULT_VARIABLE _emf_smi OUTPUT_QUIET ERROR_QUIET)
+      if(_emf_smi EQUAL 0)
+        set(CMAKE_CUDA_ARCHITECTURES native)
+      else()
+        set(CMAKE_CUDA_ARCHITECTURES 90)
+      endif()
+    endif()
+    enable_language(CUDA)
+    set(CMAKE_CUDA_STANDARD 20)
+    set(CMAKE_CUDA_STANDARD_REQUIRED ON)
+    set(CMAKE_CUDA_EXTENSIONS OFF)
+    find_package(CUDAToolkit REQUIRED)
+    set(EMFUSION_WITH_CUDA ON)
+  elseif(EMFUSION_CUDA STREQUAL "ON")
+    message(FATAL_ERROR "EMFUSION_CUDA=ON but no CUDA compiler was found: "
+                        "install the CUDA toolkit or set CUDACXX to nvcc")
+  endif()
+endif()

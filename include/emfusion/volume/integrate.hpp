@@ -1,0 +1,159 @@
+// Weighted TSDF integration of a depth image (paper eq. 10):
+//
+//   sdf(v) <- (W(v) sdf(v) + q(u) d(v)) / (W(v) + q(u)),
+//   W(v)   <- min(W_max, W(v) + q(u)),
+//
+// where u is the pixel voxel v projects to, d(v) the measured signed distance
+// along the ray, truncated to [-truncation, truncation], and q(u) a per-pixel
+// weight (the association likelihood in EM-Fusion; 1 without a weight image).
+// Voxels in free space (d >= truncation) are updated with weight 1 whatever
+// q(u) is, so that a surface that moved away is carved out of every model.
+//
+// Three refinements of the plain projective update, each on by default and
+// switchable (docs/decisions.md has the measurements behind them):
+// - point-to-plane distance (Bylow et al. 2013, the paper's [4]): d is the
+//   ray distance times the cosine of the incidence angle, i.e. the distance
+//   to the observed surface's tangent plane, also when deciding free space;
+// - behind-surface falloff: weight 1 + d / truncation for d < 0, so voxels
+//   hidden just behind a silhouette are not pulled inside by rays that only
+//   graze the surface in front of them;
+// - incidence: the cosine between the pixel's ray and the surface normal
+//   estimated from neighbouring depth pixels, so grazing measurements (whose
+//   projective distance overestimates the true one) count less.
+#pragma once
+
+#include <cmath>
+#include <string>
+
+#include "emfusion/core/camera.hpp"
+#include "emfusion/core/error.hpp"
+#include "emfusion/core/image.hpp"
+#include "emfusion/core/parallel.hpp"
+#include "emfusion/core/se3.hpp"
+#include "emfusion/volume/tsdf_volume.hpp"
+
+namespace emfusion {
+
+template <class S>
+struct IntegrationParams {
+  S max_weight = S(64);          ///< W_max
+  S free_space_weight = S(1);    ///< update weight of voxels with d >= truncation
+  bool behind_surface_falloff = true;
+  bool weight_by_incidence = true;
+  S min_incidence_weight = S(0.05);  ///< floor of the incidence weight
+  bool point_to_plane = true;  ///< distance to the tangent plane instead of along the ray
+  /// Depth of the band updated behind a surface, as a fraction of the
+  /// truncation (1 = the symmetric band of the paper).
+  S behind_band = S(0.3);
+};
+
+namespace detail {
+
+/// Integrates one column of voxels (x, y, all z): consecutive z share the
+/// ray arithmetic, and neighbouring threads touch neighbouring voxels.
+template <class S, class Store>
+struct IntegrateColumn {
+  TsdfView<S, Store> volume;
+  ImageView<const S> depth;
+  ImageView<const S> weights;  // empty: weight 1
+  PinholeCamera<S> camera;
+  SE3<S> T_camera_volume;
+  IntegrationParams<S> params;
+
+  EMF_HD void operator()(int column) const {
+    const int x = column % volume.nx, y = column / volume.nx;
+    const Vec3<S> start = T_camera_volume * volume.voxel_center(x, y, 0);
+    const Vec3<S> step = T_camera_volume.rotate(vec3(S(0), S(0), volume.voxel_size));
+    const S trunc = volume.truncation;
+    for (int z = 0; z < volume.nz; ++z) {
+      const Vec3<S> p = start + S(z) * step;
+      if (!(p.z() > S(0))) continue;
+      const Vec2<S> uv = camera.project(p);
+      const int u = int(std::floor(uv.x() + S(0.5))), v = int(std::floor(uv.y() + S(0.5)));
+      if (!depth.contains(u, v)) continue;
+      const S d = depth(u, v);
+      if (!(d > S(0)) || !std::isfinite(d)) continue;
+      // Distance along the ray through the pixel, not along the optical axis.
+      const S ray_scale = std::sqrt(S(1) + (p.x() * p.x() + p.y() * p.y()) / (p.z() * p.z()));
+      S sdf = (d - p.z()) * ray_scale;
+      const S behind = params.behind_band * trunc;
+      if (sdf < -trunc) continue;
+      S c = S(1);
+      const bool need_incidence = params.weight_by_incidence || params.point_to_plane;
+      // The incidence weight is floored, so far enough in front no weight can
+      // bring the distance inside the band: skip the neighbour reads there.
+      if (need_incidence && sdf < trunc / params.min_incidence_weight) c = incidence_weight(u, v, d);
+      if (params.point_to_plane) sdf *= c;
+      if (sdf < -behind) continue;
+      S w = weights.empty() ? S(1) : weights(u, v);
+      if (sdf >= trunc) {
+        w = params.free_space_weight;
+      } else {
+        if (params.behind_surface_falloff && sdf < S(0)) w *= S(1) + sdf / behind;
+        if (params.weight_by_incidence) w *= c;
+      }
+      if (!(w > S(0))) continue;
+      const S tsdf = sdf < trunc ? sdf : trunc;
+      const std::int64_t i = volume.index(x, y, z);
+      const S w_old = S(volume.weight[i]);
+      const S w_sum = w_old + w;
+      volume.sdf[i] = Store((w_old * S(volume.sdf[i]) + w * tsdf) / w_sum);
+      volume.weight[i] = Store(w_sum < params.max_weight ? w_sum : params.max_weight);
+    }
+  }
+
+  /// |cos| of the angle between the ray through pixel (u, v) and the surface
+  /// normal from the depth neighbours (central differences, one-sided where a
+  /// neighbour is missing), floored at min_incidence_weight.
+  EMF_HD S incidence_weight(int u, int v, S d) const {
+    const Vec3<S> p = camera.back_project(S(u), S(v), d);
+    const Vec3<S> du = neighbour_difference(u, v, 1, 0, d);
+    const Vec3<S> dv = neighbour_difference(u, v, 0, 1, d);
+    const Vec3<S> n = cross(du, dv);
+    const S nn = norm(n);
+    if (!(nn > S(0))) return params.min_incidence_weight;
+    const S c = std::fabs(dot(n, p)) / (nn * norm(p));
+    return c > params.min_incidence_weight ? c : params.min_incidence_weight;
+  }
+  EMF_HD Vec3<S> neighbour_difference(int u, int v, int su, int sv, S d) const {
+    const S dp = valid_depth(u + su, v + sv), dm = valid_depth(u - su, v - sv);
+    const Vec3<S> p = camera.back_project(S(u), S(v), d);
+    if (dp > S(0) && dm > S(0))
+      return camera.back_project(S(u + su), S(v + sv), dp) - camera.back_project(S(u - su), S(v - sv), dm);
+    if (dp > S(0)) return camera.back_project(S(u + su), S(v + sv), dp) - p;
+    if (dm > S(0)) return p - camera.back_project(S(u - su), S(v - sv), dm);
+    return Vec3<S>::zero();  // isolated pixel: no normal, lowest weight
+  }
+  EMF_HD S valid_depth(int u, int v) const {
+    if (!depth.contains(u, v)) return S(0);
+    const S d = depth(u, v);
+    return d > S(0) && std::isfinite(d) ? d : S(0);
+  }
+};
+
+}  // namespace detail
+
+/// Fuses `depth` (metres, 0 = invalid), seen by `camera` at `T_world_camera`,
+/// into `volume`. `weights`, if non-empty, gives q(u) per pixel and must have
+/// the depth image's size. Runs on the volume's backend; the images must live
+/// there too.
+template <class S, Backend B, class Store>
+void integrate(TsdfVolume<S, B, Store>& volume, const Image<S, B>& depth, const PinholeCamera<S>& camera,
+               const SE3<S>& T_world_camera, const Image<S, B>* weights = nullptr,
+               const IntegrationParams<S>& params = {}) {
+  constexpr const char* where = "integrate";
+  camera.validate(where);
+  detail::require_image(depth.view(), camera.width, camera.height, where, "depth image");
+  if (weights) detail::require_image(weights->view(), depth.width(), depth.height(), where, "weight image");
+  detail::require(params.max_weight > S(0), where,
+                  "max_weight must be positive, got " + std::to_string(double(params.max_weight)));
+  detail::IntegrateColumn<S, Store> f{volume.view(),
+                                      depth.view(),
+                                      weights ? weights->view() : ImageView<const S>{},
+                                      camera,
+                                      T_world_camera.inverse() * volume.pose(),
+                                      params};
+  for_each_index(volume.backend(), volume.dims()[0] * volume.dims()[1], f);
+}
+
+}  // namespace emfusion

@@ -1,0 +1,177 @@
+// Raycasting a TSDF volume into a camera: per pixel, the first zero crossing
+// (outside to inside) of the SDF along the pixel's ray gives depth, a
+// camera-frame vertex, a camera-frame normal and a hit flag.
+//
+// March steps follow the reference implementation: the truncation distance
+// while the SDF is truncated, then one voxel, then half a voxel once |sdf|
+// falls below 0.8 truncation. A crossing is refined by regula falsi inside
+// its bracket, so the surface is found to a small fraction of a voxel.
+#pragma once
+
+#include <cmath>
+#include <cstdint>
+#include <limits>
+
+#include "emfusion/core/camera.hpp"
+#include "emfusion/core/image.hpp"
+#include "emfusion/core/parallel.hpp"
+#include "emfusion/core/se3.hpp"
+#include "emfusion/volume/tsdf_volume.hpp"
+
+namespace emfusion {
+
+template <class S>
+struct RaycastParams {
+  S min_depth = S(0.1);  ///< metres along the optical axis
+  S max_depth = S(20);
+};
+
+/// Images a raycast writes; reuse one across frames to avoid allocations.
+template <class S, Backend B = Host>
+struct RaycastResult {
+  Image<S, B> depth;             ///< metres, 0 where nothing was hit
+  Image<Vec3<S>, B> vertices;    ///< camera frame, NaN where nothing was hit
+  Image<Vec3<S>, B> normals;     ///< camera frame, unit, facing the camera; NaN where no hit
+  Image<std::uint8_t, B> hit;    ///< 1 where the ray hit a surface
+
+  /// (Re)allocates the images for a width x height camera on `backend`.
+  void resize(int width, int height, const B& backend) {
+    if (depth.same_size(width, height)) return;
+    depth = Image<S, B>(width, height, S(0), backend);
+    vertices = Image<Vec3<S>, B>(width, height, Vec3<S>{}, backend);
+    normals = Image<Vec3<S>, B>(width, height, Vec3<S>{}, backend);
+    hit = Image<std::uint8_t, B>(width, height, 0, backend);
+  }
+};
+
+namespace detail {
+
+/// Entry and exit distances of a ray (origin o, unit direction d) through the
+/// box [lo, hi]^3; false if it misses.
+template <class S>
+EMF_HD bool clip_ray_to_box(const Vec3<S>& o, const Vec3<S>& d, const Vec3<S>& lo, const Vec3<S>& hi, S& t_in,
+                            S& t_out) {
+  for (int a = 0; a < 3; ++a) {
+    if (std::fabs(d[a]) < S(1e-12)) {
+      if (o[a] < lo[a] || o[a] > hi[a]) return false;
+      continue;
+    }
+    S t0 = (lo[a] - o[a]) / d[a], t1 = (hi[a] - o[a]) / d[a];
+    if (t0 > t1) {
+      const S tmp = t0;
+      t0 = t1, t1 = tmp;
+    }
+    t_in = t0 > t_in ? t0 : t_in;
+    t_out = t1 < t_out ? t1 : t_out;
+  }
+  return t_in <= t_out;
+}
+
+template <class S, class Store>
+struct RaycastPixel {
+  TsdfView<S, const Store> volume;
+  PinholeCamera<S> camera;
+  SE3<S> T_volume_camera;
+  RaycastParams<S> params;
+  ImageView<S> depth;
+  ImageView<Vec3<S>> vertices;
+  ImageView<Vec3<S>> normals;
+  ImageView<std::uint8_t> hit;
+
+  EMF_HD void miss(int i) const {
+    const S nan = std::numeric_limits<S>::quiet_NaN();
+    depth[i] = S(0);
+    vertices[i] = Vec3<S>::constant(nan);
+    normals[i] = Vec3<S>::constant(nan);
+    hit[i] = 0;
+  }
+
+  EMF_HD void operator()(int i) const {
+    const int u = i % camera.width, v = i / camera.width;
+    const Vec3<S> ray_cam = normalized(camera.ray(S(u), S(v)));  // z = cos of the off-axis angle
+    const Vec3<S> origin = T_volume_camera.translation();
+    const Vec3<S> dir = T_volume_camera.rotate(ray_cam);
+    // Samples need the 8 voxel centres around them: stay half a voxel inside.
+    const S half = S(0.5) * volume.voxel_size;
+    S t = params.min_depth / ray_cam.z(), t_end = params.max_depth / ray_cam.z();
+    if (!clip_ray_to_box(origin, dir, Vec3<S>::constant(half), volume.extent() - Vec3<S>::constant(half), t, t_end)) {
+      miss(i);
+      return;
+    }
+    const S trunc = volume.truncation, vs = volume.voxel_size;
+    bool have_prev = false;
+    S t_prev = t, f_prev = S(0);
+    // Bounded: each step advances at least half a voxel.
+    const int max_steps = int((t_end - t) / (S(0.5) * vs)) + 2;
+    for (int k = 0; k < max_steps && t <= t_end; ++k) {
+      S f;
+      if (!volume.sample(origin + t * dir, f)) {
+        have_prev = false;  // unobserved space: no crossing can be trusted
+        t += trunc;
+        continue;
+      }
+      if (have_prev && f_prev > S(0) && f <= S(0)) {
+        const S t_hit = refine(origin, dir, t_prev, f_prev, t, f);
+        write_hit(i, ray_cam, t_hit, origin + t_hit * dir);
+        return;
+      }
+      if (have_prev && f_prev < S(0) && f > S(0)) break;  // left a surface from behind
+      have_prev = true;
+      t_prev = t, f_prev = f;
+      t += f >= trunc ? trunc : (f >= S(0.8) * trunc ? vs : S(0.5) * vs);
+    }
+    miss(i);
+  }
+
+  /// Regula falsi on [ta, tb] with f(ta) > 0 >= f(tb).
+  EMF_HD S refine(const Vec3<S>& o, const Vec3<S>& d, S ta, S fa, S tb, S fb) const {
+    S t = ta + (tb - ta) * fa / (fa - fb);
+    for (int it = 0; it < 4; ++it) {
+      S f;
+      if (!volume.sample(o + t * d, f)) break;
+      if (f > S(0)) {
+        ta = t, fa = f;
+      } else {
+        tb = t, fb = f;
+      }
+      if (!(fa - fb > S(0))) break;
+      t = ta + (tb - ta) * fa / (fa - fb);
+    }
+    return t;
+  }
+
+  EMF_HD void write_hit(int i, const Vec3<S>& ray_cam, S t, const Vec3<S>& p_volume) const {
+    Vec3<S> g;
+    const Vec3<S> vertex = t * ray_cam;
+    if (!volume.central_gradient(p_volume, g) || !(squared_norm(g) > S(0))) {
+      miss(i);
+      return;
+    }
+    // Rotate the gradient into the camera frame: R_camera_volume = R^T.
+    Vec3<S> n = normalized(T_volume_camera.rotation().transpose() * g);
+    if (dot(n, vertex) > S(0)) n = -n;
+    depth[i] = vertex.z();
+    vertices[i] = vertex;
+    normals[i] = n;
+    hit[i] = 1;
+  }
+};
+
+}  // namespace detail
+
+/// Renders `volume` into `camera` at `T_world_camera`; writes into `out`
+/// (allocated on the volume's backend as needed).
+template <class S, Backend B, class Store>
+void raycast(const TsdfVolume<S, B, Store>& volume, const PinholeCamera<S>& camera, const SE3<S>& T_world_camera,
+             RaycastResult<S, B>& out, const RaycastParams<S>& params = {}) {
+  camera.validate("raycast");
+  detail::require(params.min_depth >= S(0) && params.max_depth > params.min_depth, "raycast",
+                  "need 0 <= min_depth < max_depth");
+  out.resize(camera.width, camera.height, volume.backend());
+  detail::RaycastPixel<S, Store> f{volume.view(),       camera,          volume.pose().inverse() * T_world_camera,
+                                   params,              out.depth.view(), out.vertices.view(),
+                                   out.normals.view(),  out.hit.view()};
+  for_each_index(volume.backend(), camera.width * camera.height, f);
+}
+
+}  // namespace emfusion
