@@ -5,6 +5,7 @@
 // value) meaning "no measurement".
 #pragma once
 
+#include <cmath>
 #include <string>
 #include <type_traits>
 #include <vector>
@@ -31,9 +32,22 @@ struct ImageView {
   EMF_HD bool empty() const { return data == nullptr || width <= 0 || height <= 0; }
   EMF_HD bool contains(int x, int y) const { return x >= 0 && y >= 0 && x < width && y < height; }
 
-  /// A read-only view of the same pixels.
-  EMF_HD operator ImageView<const T>() const { return {data, width, height}; }
+  /// A read-only view of the same pixels (only for views of mutable pixels:
+  /// a conversion of ImageView<const T> to itself would draw nvcc warnings).
+  template <class U = T>
+    requires(!std::is_const_v<U>)
+  EMF_HD operator ImageView<const U>() const {
+    return {data, width, height};
+  }
 };
+
+/// True for a depth that is a measurement: finite and positive. Zero marks a
+/// hole; negative depths cannot come from a pinhole camera, so they are holes
+/// too.
+template <class S>
+EMF_HD bool is_valid_depth(S depth) {
+  return std::isfinite(depth) && depth > S(0);
+}
 
 template <class T, Backend B = Host>
 class Image {

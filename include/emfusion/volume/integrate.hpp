@@ -24,6 +24,7 @@
 
 #include <cmath>
 #include <string>
+#include <utility>
 
 #include "emfusion/core/camera.hpp"
 #include "emfusion/core/error.hpp"
@@ -55,7 +56,8 @@ template <class S, class Store>
 struct IntegrateColumn {
   TsdfView<S, Store> volume;
   ImageView<const S> depth;
-  ImageView<const S> weights;  // empty: weight 1
+  ImageView<const S> weights;    // empty: weight 1
+  ImageView<const S> incidence;  // empty: cosine 1 (refinements off)
   PinholeCamera<S> camera;
   SE3<S> T_camera_volume;
   IntegrationParams<S> params;
@@ -72,17 +74,13 @@ struct IntegrateColumn {
       const int u = int(std::floor(uv.x() + S(0.5))), v = int(std::floor(uv.y() + S(0.5)));
       if (!depth.contains(u, v)) continue;
       const S d = depth(u, v);
-      if (!(d > S(0)) || !std::isfinite(d)) continue;
+      if (!is_valid_depth(d)) continue;
       // Distance along the ray through the pixel, not along the optical axis.
       const S ray_scale = std::sqrt(S(1) + (p.x() * p.x() + p.y() * p.y()) / (p.z() * p.z()));
       S sdf = (d - p.z()) * ray_scale;
       const S behind = params.behind_band * trunc;
       if (sdf < -trunc) continue;
-      S c = S(1);
-      const bool need_incidence = params.weight_by_incidence || params.point_to_plane;
-      // The incidence weight is floored, so far enough in front no weight can
-      // bring the distance inside the band: skip the neighbour reads there.
-      if (need_incidence && sdf < trunc / params.min_incidence_weight) c = incidence_weight(u, v, d);
+      const S c = incidence.empty() ? S(1) : incidence(u, v);
       if (params.point_to_plane) sdf *= c;
       if (sdf < -behind) continue;
       S w = weights.empty() ? S(1) : weights(u, v);
@@ -101,19 +99,33 @@ struct IntegrateColumn {
       volume.weight[i] = Store(w_sum < params.max_weight ? w_sum : params.max_weight);
     }
   }
+};
 
-  /// |cos| of the angle between the ray through pixel (u, v) and the surface
-  /// normal from the depth neighbours (central differences, one-sided where a
-  /// neighbour is missing), floored at min_incidence_weight.
+/// Per pixel: |cos| of the angle between the pixel's ray and the surface
+/// normal from the depth neighbours (central differences, one-sided where a
+/// neighbour is missing), floored at min_incidence_weight; 0 where the depth
+/// is invalid. Computed once per frame, read by every voxel of the pixel.
+template <class S>
+struct IncidencePixel {
+  ImageView<const S> depth;
+  PinholeCamera<S> camera;
+  S floor;
+  ImageView<S> out;
+
+  EMF_HD void operator()(int i) const {
+    const int u = i % depth.width, v = i / depth.width;
+    const S d = valid_depth(u, v);
+    out[i] = d > S(0) ? incidence_weight(u, v, d) : S(0);
+  }
   EMF_HD S incidence_weight(int u, int v, S d) const {
     const Vec3<S> p = camera.back_project(S(u), S(v), d);
     const Vec3<S> du = neighbour_difference(u, v, 1, 0, d);
     const Vec3<S> dv = neighbour_difference(u, v, 0, 1, d);
     const Vec3<S> n = cross(du, dv);
     const S nn = norm(n);
-    if (!(nn > S(0))) return params.min_incidence_weight;
+    if (!(nn > S(0))) return floor;
     const S c = std::fabs(dot(n, p)) / (nn * norm(p));
-    return c > params.min_incidence_weight ? c : params.min_incidence_weight;
+    return c > floor ? c : floor;
   }
   EMF_HD Vec3<S> neighbour_difference(int u, int v, int su, int sv, S d) const {
     const S dp = valid_depth(u + su, v + sv), dm = valid_depth(u - su, v - sv);
@@ -127,7 +139,7 @@ struct IntegrateColumn {
   EMF_HD S valid_depth(int u, int v) const {
     if (!depth.contains(u, v)) return S(0);
     const S d = depth(u, v);
-    return d > S(0) && std::isfinite(d) ? d : S(0);
+    return is_valid_depth(d) ? d : S(0);
   }
 };
 
@@ -147,9 +159,16 @@ void integrate(TsdfVolume<S, B, Store>& volume, const Image<S, B>& depth, const 
   if (weights) detail::require_image(weights->view(), depth.width(), depth.height(), where, "weight image");
   detail::require(params.max_weight > S(0), where,
                   "max_weight must be positive, got " + std::to_string(double(params.max_weight)));
+  Image<S, B> incidence;
+  if (params.point_to_plane || params.weight_by_incidence) {
+    incidence = Image<S, B>(depth.width(), depth.height(), S(0), volume.backend());
+    for_each_index(volume.backend(), depth.size(),
+                   detail::IncidencePixel<S>{depth.view(), camera, params.min_incidence_weight, incidence.view()});
+  }
   detail::IntegrateColumn<S, Store> f{volume.view(),
                                       depth.view(),
                                       weights ? weights->view() : ImageView<const S>{},
+                                      std::as_const(incidence).view(),
                                       camera,
                                       T_world_camera.inverse() * volume.pose(),
                                       params};

@@ -1,0 +1,140 @@
+// bench_volume: time of integrating and raycasting one 640x480 frame with a
+// large TSDF volume (default 512^3 voxels of 1 cm, the paper's background),
+// on every backend built or the one asked for.
+//
+//   bench_volume [--voxels N] [--repeats R] [--backend cpu|cuda|all] [--json FILE]
+//
+// The scene is a synthetic room corner seen from the paper's background
+// placement (camera at the centre of one face of the volume). Each stage is
+// run `repeats` times after one warm-up; medians and 90th percentiles are
+// printed. Set OMP_WAIT_POLICY=passive on small machines (docs/benchmarks.md).
+#include <algorithm>
+#include <chrono>
+#include <cstdio>
+#include <cstdlib>
+#include <fstream>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "emfusion/sim/primitives.hpp"
+#include "emfusion/sim/render.hpp"
+#include "emfusion/volume/integrate.hpp"
+#include "emfusion/volume/raycast.hpp"
+
+using namespace emfusion;
+using S = float;
+
+namespace {
+
+struct Options {
+  int voxels = 512;
+  int repeats = 10;
+  std::string backend = "all";
+  std::string json;
+};
+
+struct Stats {
+  double median = 0, p90 = 0;
+};
+
+Stats stats(std::vector<double> v) {
+  std::sort(v.begin(), v.end());
+  return {v[v.size() / 2], v[std::min(v.size() - 1, (v.size() * 9) / 10)]};
+}
+
+sim::Scene<S> room(const SE3<S>& T_world_camera) {
+  // Floor 1 m below the camera, a back wall 3.5 m ahead, a side wall, clutter.
+  sim::Scene<S> scene;
+  const auto at = [&](S x, S y, S z) { return T_world_camera * vec3(x, y, z); };
+  // A plane pose has the normal as its z axis: look from the floor point up.
+  scene.add(sim::make_plane(sim::look_at(at(0, 1, 0), at(0, 0, 0), at(0, 0, 1) - at(0, 0, 0))));
+  scene.add(sim::make_box(SE3<S>::translation(at(0, 0, 3.8f)), vec3(3.f, 3.f, 0.3f)));
+  scene.add(sim::make_box(SE3<S>::translation(at(2.2f, 0, 2)), vec3(0.3f, 3.f, 3.f)));
+  scene.add(sim::make_sphere(at(-0.5f, 0.3f, 1.8f), 0.3f));
+  scene.add(sim::make_box(SE3<S>::translation(at(0.6f, 0.6f, 2.2f)), vec3(0.3f, 0.4f, 0.3f)));
+  scene.add(sim::make_cylinder(SE3<S>::translation(at(-1.0f, 0.4f, 2.8f)), 0.2f, 0.6f));
+  return scene;
+}
+
+template <class B>
+void run(const Options& o, std::FILE* json, bool& first) {
+  const B backend{};
+  const PinholeCamera<S> camera{};
+  const SE3<S> T_world_camera = SE3<S>::identity();
+  VolumeGeometry<S> g;
+  g.dims = Vec3i{{o.voxels, o.voxels, o.voxels}};
+  g.voxel_size = 5.12f / S(o.voxels);
+  g.T_world_volume = volume_pose_in_front_of(T_world_camera, 5.12f);
+  TsdfVolume<S, B> volume(g, backend);
+
+  Image<S, B> depth;
+  sim::render_depth(room(T_world_camera), camera, T_world_camera, depth, static_cast<Image<int, B>*>(nullptr), {},
+                    backend);
+  RaycastResult<S, B> cast;
+  using clock = std::chrono::steady_clock;
+  auto time = [&](auto&& f) {
+    backend.synchronize();
+    const auto t0 = clock::now();
+    f();
+    backend.synchronize();
+    return std::chrono::duration<double, std::milli>(clock::now() - t0).count();
+  };
+  std::vector<double> integrate_ms, raycast_ms;
+  for (int k = 0; k <= o.repeats; ++k) {
+    const double ti = time([&] { integrate(volume, depth, camera, T_world_camera); });
+    const double tr = time([&] { raycast(volume, camera, T_world_camera, cast); });
+    if (k > 0) integrate_ms.push_back(ti), raycast_ms.push_back(tr);  // k = 0 warms up
+  }
+  const Stats si = stats(integrate_ms), sr = stats(raycast_ms);
+  std::printf("%-5s %4d^3 (%6.0f MiB)  integrate median %8.2f ms  p90 %8.2f ms | raycast median %8.2f ms  p90 %8.2f ms\n",
+              B::name, o.voxels, volume.memory_bytes() / 1048576.0, si.median, si.p90, sr.median, sr.p90);
+  if (json) {
+    std::fprintf(json,
+                 "%s  {\"backend\": \"%s\", \"voxels\": %d, \"repeats\": %d, \"integrate_ms\": {\"median\": %.3f, "
+                 "\"p90\": %.3f}, \"raycast_ms\": {\"median\": %.3f, \"p90\": %.3f}}",
+                 first ? "" : ",\n", B::name, o.voxels, o.repeats, si.median, si.p90, sr.median, sr.p90);
+    first = false;
+  }
+}
+
+Options parse(int argc, char** argv) {
+  Options o;
+  for (int i = 1; i < argc; ++i) {
+    const std::string a = argv[i];
+    if (i + 1 >= argc) throw std::invalid_argument("unknown option or missing value: '" + a + "'");
+    const std::string v = argv[++i];
+    if (a == "--voxels") o.voxels = std::stoi(v);
+    else if (a == "--repeats") o.repeats = std::stoi(v);
+    else if (a == "--backend") o.backend = v;
+    else if (a == "--json") o.json = v;
+    else throw std::invalid_argument("unknown option '" + a + "'");
+  }
+  if (o.voxels <= 0 || o.repeats <= 0) throw std::invalid_argument("--voxels and --repeats must be positive");
+  if (o.backend != "cpu" && o.backend != "cuda" && o.backend != "all")
+    throw std::invalid_argument("--backend must be cpu, cuda or all");
+  return o;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  try {
+    const Options o = parse(argc, argv);
+    std::FILE* json = o.json.empty() ? nullptr : std::fopen(o.json.c_str(), "w");
+    if (!o.json.empty() && !json) throw std::runtime_error("cannot write '" + o.json + "'");
+    if (json) std::fprintf(json, "[\n");
+    bool first = true;
+    if (o.backend != "cuda") run<Host>(o, json, first);
+#if EMFUSION_HAS_CUDA
+    if (o.backend != "cpu") run<Cuda>(o, json, first);
+#else
+    if (o.backend == "cuda") throw std::invalid_argument("this build has no CUDA backend");
+#endif
+    if (json) std::fprintf(json, "\n]\n"), std::fclose(json);
+    return 0;
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "bench_volume: error: %s\n", e.what());
+    return 1;
+  }
+}
