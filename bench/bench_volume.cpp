@@ -21,6 +21,7 @@
 #include "emfusion/sim/render.hpp"
 #include "emfusion/volume/integrate.hpp"
 #include "emfusion/volume/raycast.hpp"
+#include "support/args.hpp"
 
 using namespace emfusion;
 using S = float;
@@ -104,13 +105,12 @@ Options parse(int argc, char** argv) {
     const std::string a = argv[i];
     if (i + 1 >= argc) throw std::invalid_argument("unknown option or missing value: '" + a + "'");
     const std::string v = argv[++i];
-    if (a == "--voxels") o.voxels = std::stoi(v);
-    else if (a == "--repeats") o.repeats = std::stoi(v);
+    if (a == "--voxels") o.voxels = examples::parse_positive_int(a, v, 2048);
+    else if (a == "--repeats") o.repeats = examples::parse_positive_int(a, v);
     else if (a == "--backend") o.backend = v;
     else if (a == "--json") o.json = v;
     else throw std::invalid_argument("unknown option '" + a + "'");
   }
-  if (o.voxels <= 0 || o.repeats <= 0) throw std::invalid_argument("--voxels and --repeats must be positive");
   if (o.backend != "cpu" && o.backend != "cuda" && o.backend != "all")
     throw std::invalid_argument("--backend must be cpu, cuda or all");
   return o;

@@ -23,6 +23,7 @@
 #include "emfusion/volume/marching_cubes.hpp"
 #include "emfusion/volume/mesh.hpp"
 #include "emfusion/volume/raycast.hpp"
+#include "support/args.hpp"
 
 using namespace emfusion;
 using S = float;
@@ -36,14 +37,6 @@ struct Options {
   std::string backend = "cpu";
 };
 
-int parse_positive(const std::string& flag, const char* value) {
-  char* end = nullptr;
-  const long v = std::strtol(value, &end, 10);
-  if (end == value || *end != '\0' || v <= 0 || v > 100000)
-    throw std::invalid_argument(flag + " expects a positive integer, got '" + value + "'");
-  return int(v);
-}
-
 Options parse(int argc, char** argv) {
   Options o;
   for (int i = 1; i < argc; ++i) {
@@ -55,8 +48,8 @@ Options parse(int argc, char** argv) {
     if (i + 1 >= argc) throw std::invalid_argument("unknown option or missing value: '" + a + "'");
     const char* v = argv[++i];
     if (a == "--output") o.output = v;
-    else if (a == "--frames") o.frames = parse_positive(a, v);
-    else if (a == "--voxels") o.voxels = parse_positive(a, v);
+    else if (a == "--frames") o.frames = examples::parse_positive_int(a, v);
+    else if (a == "--voxels") o.voxels = examples::parse_positive_int(a, v, 1024);
     else if (a == "--backend") o.backend = v;
     else throw std::invalid_argument("unknown option '" + a + "'");
   }
@@ -85,6 +78,11 @@ double median(std::vector<double> v) {
 
 template <class B>
 int run(const Options& o) {
+  // Fail before the work, not after it, if the output cannot be written.
+  const std::filesystem::path dir = std::filesystem::path(o.output) / "meshes";
+  std::error_code ec;
+  std::filesystem::create_directories(dir, ec);
+  if (ec) throw std::runtime_error("cannot create output directory '" + dir.string() + "': " + ec.message());
   const B backend{};
   const auto scene = table_top();
   const PinholeCamera<S> camera{};  // 640x480, fx = fy = 525
@@ -136,10 +134,6 @@ int run(const Options& o) {
   std::printf("  mesh: %zu vertices, %zu triangles; median distance to the true surface %.2f mm\n",
               mesh.vertices.size(), mesh.triangles.size(), 1000 * median(vertex_err));
 
-  const std::filesystem::path dir = std::filesystem::path(o.output) / "meshes";
-  std::error_code ec;
-  std::filesystem::create_directories(dir, ec);
-  if (ec) throw std::runtime_error("cannot create output directory '" + dir.string() + "': " + ec.message());
   const std::string path = (dir / "scene.ply").string();
   write_ply(path, mesh);
   std::printf("  wrote %s\n", path.c_str());

@@ -44,7 +44,8 @@ if [[ -n "$nvcc_path" ]]; then
     -DEMFUSION_CUDA=ON \
     -DCMAKE_CUDA_COMPILER="$nvcc_path" \
     -DCMAKE_CUDA_ARCHITECTURES=90 \
-    -DCMAKE_BUILD_TYPE=Release
+    -DCMAKE_BUILD_TYPE=Release \
+    -DEMFUSION_WERROR=ON
   say "CUDA build: building all targets with -j${jobs}"
   cmake --build build-cuda -j "$jobs"
   say "CUDA build: compiled all targets in build-cuda/ but did NOT run them (no GPU is assumed here)."

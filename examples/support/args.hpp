@@ -1,0 +1,22 @@
+// Command-line helpers shared by the demo and the benchmarks: strict number
+// parsing with messages that name the flag and the bad value.
+#pragma once
+
+#include <cstdlib>
+#include <stdexcept>
+#include <string>
+
+namespace emfusion::examples {
+
+/// The value of `flag` as an integer in [1, max]; throws std::invalid_argument
+/// naming the flag otherwise.
+inline int parse_positive_int(const std::string& flag, const std::string& value, long max = 100000) {
+  char* end = nullptr;
+  const long v = std::strtol(value.c_str(), &end, 10);
+  if (value.empty() || *end != '\0' || v <= 0 || v > max)
+    throw std::invalid_argument(flag + " expects an integer from 1 to " + std::to_string(max) + ", got '" + value +
+                                "'");
+  return int(v);
+}
+
+}  // namespace emfusion::examples
