@@ -14,6 +14,11 @@
 // - point-to-plane distance (Bylow et al. 2013, the paper's [4]): d is the
 //   ray distance times the cosine of the incidence angle, i.e. the distance
 //   to the observed surface's tangent plane, also when deciding free space;
+// - silhouette guard: a voxel counts as free space only if it lies a
+//   truncation distance in front of every depth within a lateral distance of
+//   `silhouette_guard` voxels around its pixel, so that rays passing just
+//   beside an object's silhouette do not carve the voxels along the object's
+//   border (they erode otherwise);
 // - behind-surface falloff: weight 1 + d / truncation for d < 0, so voxels
 //   hidden just behind a silhouette are not pulled inside by rays that only
 //   graze the surface in front of them;
@@ -22,6 +27,7 @@
 //   projective distance overestimates the true one) count less.
 #pragma once
 
+#include <algorithm>
 #include <cmath>
 #include <string>
 #include <utility>
@@ -43,6 +49,7 @@ struct IntegrationParams {
   bool weight_by_incidence = true;
   S min_incidence_weight = S(0.05);  ///< floor of the incidence weight
   bool point_to_plane = true;  ///< distance to the tangent plane instead of along the ray
+  S silhouette_guard = S(1.5);  ///< voxels (lateral); 0 turns the guard off
   /// Depth of the band updated behind a surface, as a fraction of the
   /// truncation (1 = the symmetric band of the paper).
   S behind_band = S(0.3);
@@ -57,7 +64,8 @@ struct IntegrateColumn {
   TsdfView<S, Store> volume;
   ImageView<const S> depth;
   ImageView<const S> weights;    // empty: weight 1
-  ImageView<const S> incidence;  // empty: cosine 1 (refinements off)
+  ImageView<const S> incidence;   // empty: cosine 1 (refinements off)
+  ImageView<const S> near_depth;  // empty: no silhouette guard
   PinholeCamera<S> camera;
   SE3<S> T_camera_volume;
   IntegrationParams<S> params;
@@ -85,6 +93,8 @@ struct IntegrateColumn {
       if (sdf < -behind) continue;
       S w = weights.empty() ? S(1) : weights(u, v);
       if (sdf >= trunc) {
+        // Beside a silhouette the voxel may belong to the nearer surface.
+        if (!near_depth.empty() && (near_depth(u, v) - p.z()) * ray_scale < trunc) continue;
         w = params.free_space_weight;
       } else {
         if (params.behind_surface_falloff && sdf < S(0)) w *= S(1) + sdf / behind;
@@ -101,10 +111,10 @@ struct IntegrateColumn {
   }
 };
 
-/// Per pixel: |cos| of the angle between the pixel's ray and the surface
-/// normal from the depth neighbours (central differences, one-sided where a
-/// neighbour is missing), floored at min_incidence_weight; 0 where the depth
-/// is invalid. Computed once per frame, read by every voxel of the pixel.
+/// Per pixel, once per frame: |cos| of the angle between the pixel's ray and
+/// the surface normal from the depth neighbours (central differences,
+/// one-sided where a neighbour is missing), floored at min_incidence_weight;
+/// 0 where the depth is invalid.
 template <class S>
 struct IncidencePixel {
   ImageView<const S> depth;
@@ -143,6 +153,38 @@ struct IncidencePixel {
   }
 };
 
+
+/// One pass of the silhouette guard's minimum filter: the smallest valid
+/// depth within a radius along rows (dx = 1) or columns (dy = 1). The radius
+/// of a pixel is `lateral` metres at its own depth, in pixels, at most
+/// max_radius: two passes give (nearly) a square window.
+template <class S>
+struct NearestDepthPass {
+  ImageView<const S> depth;  // the frame's depth: sets each pixel's radius
+  ImageView<const S> in;     // depth or the row pass's output
+  ImageView<S> out;
+  S lateral_pixels_at_1m;  // lateral * f
+  int dx, dy;
+  static constexpr int max_radius = 16;
+
+  EMF_HD void operator()(int i) const {
+    const int u = i % depth.width, v = i / depth.width;
+    const S d = depth[i];
+    S nearest = is_valid_depth(in[i]) ? in[i] : S(0);
+    if (is_valid_depth(d)) {
+      const S r = std::ceil(lateral_pixels_at_1m / d);
+      const int radius = r < S(max_radius) ? int(r) : max_radius;
+      for (int k = -radius; k <= radius; ++k) {
+        const int x = u + k * dx, y = v + k * dy;
+        if (!in.contains(x, y)) continue;
+        const S n = in(x, y);
+        if (is_valid_depth(n) && (nearest == S(0) || n < nearest)) nearest = n;
+      }
+    }
+    out[i] = nearest;
+  }
+};
+
 }  // namespace detail
 
 /// Fuses `depth` (metres, 0 = invalid), seen by `camera` at `T_world_camera`,
@@ -157,18 +199,32 @@ void integrate(TsdfVolume<S, B, Store>& volume, const Image<S, B>& depth, const 
   camera.validate(where);
   detail::require_image(depth.view(), camera.width, camera.height, where, "depth image");
   if (weights) detail::require_image(weights->view(), depth.width(), depth.height(), where, "weight image");
+  detail::require(params.silhouette_guard >= S(0), where,
+                  "silhouette_guard must not be negative, got " + std::to_string(double(params.silhouette_guard)));
   detail::require(params.max_weight > S(0), where,
                   "max_weight must be positive, got " + std::to_string(double(params.max_weight)));
-  Image<S, B> incidence;
+  const B& backend = volume.backend();
+  Image<S, B> incidence, near_depth;
   if (params.point_to_plane || params.weight_by_incidence) {
-    incidence = Image<S, B>(depth.width(), depth.height(), S(0), volume.backend());
-    for_each_index(volume.backend(), depth.size(),
+    incidence = Image<S, B>(depth.width(), depth.height(), S(0), backend);
+    for_each_index(backend, depth.size(),
                    detail::IncidencePixel<S>{depth.view(), camera, params.min_incidence_weight, incidence.view()});
+  }
+  if (params.silhouette_guard > S(0)) {
+    Image<S, B> rows(depth.width(), depth.height(), S(0), backend);
+    near_depth = Image<S, B>(depth.width(), depth.height(), S(0), backend);
+    const S lateral = params.silhouette_guard * volume.voxel_size() * std::max(camera.fx, camera.fy);
+    for_each_index(backend, depth.size(),
+                   detail::NearestDepthPass<S>{depth.view(), depth.view(), rows.view(), lateral, 1, 0});
+    for_each_index(backend, depth.size(),
+                   detail::NearestDepthPass<S>{depth.view(), std::as_const(rows).view(), near_depth.view(), lateral,
+                                               0, 1});
   }
   detail::IntegrateColumn<S, Store> f{volume.view(),
                                       depth.view(),
                                       weights ? weights->view() : ImageView<const S>{},
                                       std::as_const(incidence).view(),
+                                      std::as_const(near_depth).view(),
                                       camera,
                                       T_world_camera.inverse() * volume.pose(),
                                       params};

@@ -1,0 +1,325 @@
+// Reading and writing single-channel PNG images (depth maps, instance-label
+// masks) through libpng, without OpenCV.
+//
+// read_png_u16 reads 16-bit grayscale PNGs, and also 8-bit (or 1/2/4-bit)
+// grayscale ones, whose values it widens unchanged (a label 7 stays 7; it is
+// not rescaled to 16 bits): instance masks come in either depth, and callers
+// that need 16 bits (depth images) check that themselves, as TumSequence does.
+// read_png_u8 reads 8-bit (or 1/2/4-bit, values unchanged) grayscale PNGs and
+// rejects 16-bit ones rather than drop their low byte. Colour, palette and
+// alpha PNGs are rejected: there is no silent conversion to gray.
+//
+// write_png writes 8- or 16-bit grayscale, non-interlaced. Like write_ply it
+// writes "<path>.tmp" and renames it over `path` only once it is complete.
+//
+// Errors are std::runtime_error "read_png: '<path>': <problem>" (or
+// "write_png: ..."): a file that cannot be opened, a file that is not a PNG,
+// corrupt or truncated data, the wrong bit depth or channel count. libpng
+// reports errors by longjmp; every libpng call that can fail runs inside a
+// small function that holds only trivially destructible locals and turns the
+// longjmp into a return value, and the libpng structures are freed by a guard
+// outside it, so a bad file neither leaks nor skips a C++ destructor.
+#pragma once
+
+#include <bit>
+#include <cerrno>
+#include <csetjmp>
+#include <cstdint>
+#include <cstdio>
+#include <cstring>
+#include <memory>
+#include <stdexcept>
+#include <string>
+#include <system_error>
+#include <type_traits>
+#include <vector>
+
+#include <png.h>
+
+#include "emfusion/core/backend.hpp"
+#include "emfusion/core/image.hpp"
+
+namespace emfusion {
+
+namespace detail::png {
+
+inline std::string quoted(const std::string& path) { return "'" + path + "'"; }
+inline std::string errno_text(int error) { return std::generic_category().message(error); }
+
+[[noreturn]] inline void fail(const char* where, const std::string& path, const std::string& problem) {
+  throw std::runtime_error(std::string(where) + ": " + quoted(path) + ": " + problem);
+}
+
+struct FileCloser {
+  void operator()(std::FILE* f) const { std::fclose(f); }
+};
+using File = std::unique_ptr<std::FILE, FileCloser>;
+
+/// What the libpng callbacks share with the reader: the file's bytes and
+/// room for libpng's error message. Trivially destructible on purpose.
+struct Context {
+  const unsigned char* data = nullptr;
+  std::size_t size = 0;
+  std::size_t offset = 0;
+  char message[256] = {};
+};
+
+/// libpng's error callback: keep the message, then jump back to the setjmp
+/// of the stage function that made the failing call.
+[[noreturn]] inline void on_error(png_structp png, png_const_charp message) {
+  auto* context = static_cast<Context*>(png_get_error_ptr(png));
+  if (context) std::snprintf(context->message, sizeof(context->message), "%s", message ? message : "unknown error");
+  png_longjmp(png, 1);
+}
+
+/// Warnings (unknown colour profiles and the like) do not stop a read.
+inline void on_warning(png_structp, png_const_charp) {}
+
+inline void read_from_memory(png_structp png, png_bytep out, std::size_t count) {
+  auto* context = static_cast<Context*>(png_get_io_ptr(png));
+  if (context->size - context->offset < count) png_error(png, "unexpected end of file (the file is truncated)");
+  std::memcpy(out, context->data + context->offset, count);
+  context->offset += count;
+}
+
+struct Header {
+  png_uint_32 width = 0, height = 0;
+  int bit_depth = 0, color_type = 0, interlace = 0;
+  std::size_t row_bytes = 0;  // after the transformations
+};
+
+// The stage functions below call libpng between a setjmp and its possible
+// longjmp. They hold no locals with destructors and touch no local after the
+// jump, which is what makes the longjmp well defined in C++.
+
+/// Reads the header, sets up the transformations (1/2/4-bit samples to one
+/// byte each, values kept; 16-bit samples in host byte order) and reports
+/// the row size they give.
+inline bool read_header(png_structp png, png_infop info, Header* header) {
+  if (setjmp(png_jmpbuf(png))) return false;
+  png_read_info(png, info);
+  png_get_IHDR(png, info, &header->width, &header->height, &header->bit_depth, &header->color_type, &header->interlace,
+               nullptr, nullptr);
+  png_set_packing(png);
+  // PNG stores 16-bit samples big-endian.
+  if constexpr (std::endian::native == std::endian::little) png_set_swap(png);
+  png_set_interlace_handling(png);
+  png_read_update_info(png, info);
+  header->row_bytes = png_get_rowbytes(png, info);
+  return true;
+}
+
+inline bool read_rows(png_structp png, png_bytepp rows) {
+  if (setjmp(png_jmpbuf(png))) return false;
+  png_read_image(png, rows);
+  png_read_end(png, nullptr);
+  return true;
+}
+
+inline bool write_rows(png_structp png, png_infop info, std::FILE* file, png_uint_32 width, png_uint_32 height,
+                       int bit_depth, png_bytepp rows) {
+  if (setjmp(png_jmpbuf(png))) return false;
+  png_init_io(png, file);
+  png_set_IHDR(png, info, width, height, bit_depth, PNG_COLOR_TYPE_GRAY, PNG_INTERLACE_NONE,
+               PNG_COMPRESSION_TYPE_DEFAULT, PNG_FILTER_TYPE_DEFAULT);
+  png_write_info(png, info);
+  if (bit_depth == 16 && std::endian::native == std::endian::little) png_set_swap(png);
+  png_write_image(png, rows);  // libpng copies each row before swapping: `rows` stays as it was
+  png_write_end(png, nullptr);
+  return true;
+}
+
+struct ReadStructs {
+  png_structp png = nullptr;
+  png_infop info = nullptr;
+  ReadStructs() = default;
+  ReadStructs(const ReadStructs&) = delete;
+  ReadStructs& operator=(const ReadStructs&) = delete;
+  ~ReadStructs() {
+    if (png) png_destroy_read_struct(&png, &info, nullptr);
+  }
+};
+
+struct WriteStructs {
+  png_structp png = nullptr;
+  png_infop info = nullptr;
+  WriteStructs() = default;
+  WriteStructs(const WriteStructs&) = delete;
+  WriteStructs& operator=(const WriteStructs&) = delete;
+  ~WriteStructs() {
+    if (png) png_destroy_write_struct(&png, &info);
+  }
+};
+
+inline std::vector<unsigned char> read_file(const std::string& path, const char* where) {
+  errno = 0;
+  File file(std::fopen(path.c_str(), "rb"));
+  if (!file) fail(where, path, "cannot open for reading: " + errno_text(errno));
+  std::vector<unsigned char> data;
+  unsigned char buffer[1 << 16];
+  std::size_t n;
+  while ((n = std::fread(buffer, 1, sizeof(buffer), file.get())) > 0) data.insert(data.end(), buffer, buffer + n);
+  if (std::ferror(file.get())) fail(where, path, "read error: " + errno_text(errno));
+  return data;
+}
+
+inline std::string color_type_name(int color_type) {
+  switch (color_type) {
+    case PNG_COLOR_TYPE_GRAY:
+      return "grayscale";
+    case PNG_COLOR_TYPE_GRAY_ALPHA:
+      return "grayscale+alpha (2 channels)";
+    case PNG_COLOR_TYPE_RGB:
+      return "RGB (3 channels)";
+    case PNG_COLOR_TYPE_RGB_ALPHA:
+      return "RGBA (4 channels)";
+    case PNG_COLOR_TYPE_PALETTE:
+      return "palette (colour-mapped)";
+  }
+  return "colour type " + std::to_string(color_type);
+}
+
+/// Reads a grayscale PNG into an image of T (std::uint8_t or std::uint16_t).
+/// A 16-bit T also takes files of 8 bits or fewer when `allow_narrower`,
+/// values unchanged.
+template <class T>
+Image<T, Host> read_gray(const std::string& path, bool allow_narrower) {
+  static_assert(std::is_same_v<T, std::uint8_t> || std::is_same_v<T, std::uint16_t>);
+  constexpr const char* where = "read_png";
+  constexpr int target_bits = 8 * int(sizeof(T));
+
+  const std::vector<unsigned char> bytes = read_file(path, where);
+  if (bytes.size() < 8 || png_sig_cmp(bytes.data(), 0, 8) != 0)
+    fail(where, path, bytes.empty() ? "not a PNG file (the file is empty)" : "not a PNG file (bad signature)");
+
+  Context context;
+  context.data = bytes.data();
+  context.size = bytes.size();
+  ReadStructs s;
+  s.png = png_create_read_struct(PNG_LIBPNG_VER_STRING, &context, on_error, on_warning);
+  if (s.png) s.info = png_create_info_struct(s.png);
+  if (!s.png || !s.info) fail(where, path, "cannot initialise libpng (out of memory or a libpng version mismatch)");
+  png_set_read_fn(s.png, &context, read_from_memory);
+
+  const auto corrupt = [&] { fail(where, path, std::string("corrupt or truncated PNG: ") + context.message); };
+  Header header;
+  if (!read_header(s.png, s.info, &header)) corrupt();
+
+  if (header.color_type != PNG_COLOR_TYPE_GRAY)
+    fail(where, path,
+         "expected a single-channel (grayscale) PNG, got " + color_type_name(header.color_type) + " " +
+             std::to_string(header.bit_depth) + "-bit");
+  if (header.bit_depth > target_bits)
+    fail(where, path,
+         std::to_string(header.bit_depth) + "-bit grayscale PNG, but " + std::to_string(target_bits) +
+             "-bit was requested (read it with read_png_u16)");
+  if (header.bit_depth < target_bits && !allow_narrower)
+    fail(where, path,
+         std::to_string(header.bit_depth) + "-bit grayscale PNG, but " + std::to_string(target_bits) +
+             "-bit is required");
+  const bool widen = header.bit_depth <= 8 && target_bits == 16;
+  const std::size_t sample_bytes = widen ? 1 : sizeof(T);
+  const std::size_t width = header.width, height = header.height;
+  if (header.row_bytes != width * sample_bytes)
+    fail(where, path,
+         "unexpected decoded row size " + std::to_string(header.row_bytes) + " for width " + std::to_string(width));
+  // Deflate compresses at most about 1032:1: a header that promises more
+  // pixels than the file could hold is corrupt, and must not make us
+  // allocate gigabytes.
+  if (height * (header.row_bytes + 1) > 1100 * bytes.size() + 4096)
+    fail(where, path,
+         "corrupt header: a " + std::to_string(width) + "x" + std::to_string(height) + " image cannot be stored in " +
+             std::to_string(bytes.size()) + " bytes");
+  if (width == 0 || height == 0 || width * height > std::size_t(INT32_MAX))
+    fail(where, path, "unsupported image size " + std::to_string(width) + "x" + std::to_string(height));
+
+  Image<T, Host> image(static_cast<int>(width), static_cast<int>(height));
+  T* pixels = image.view().data;
+  std::vector<unsigned char> narrow;  // the file's 8-bit samples, when widening
+  if (widen) narrow.resize(width * height);
+  std::vector<png_bytep> rows(height);
+  for (std::size_t y = 0; y < height; ++y)
+    rows[y] = widen ? narrow.data() + y * width : reinterpret_cast<png_bytep>(pixels + y * width);
+  if (!read_rows(s.png, rows.data())) corrupt();
+  if (widen)
+    for (std::size_t i = 0; i < narrow.size(); ++i) pixels[i] = T(narrow[i]);
+  return image;
+}
+
+template <class T>
+void write_gray(const std::string& path, const Image<T, Host>& image) {
+  static_assert(std::is_same_v<T, std::uint8_t> || std::is_same_v<T, std::uint16_t>);
+  constexpr const char* where = "write_png";
+  if (image.empty())
+    throw std::invalid_argument(std::string(where) + ": " + quoted(path) + ": cannot write an empty image (" +
+                                std::to_string(image.width()) + "x" + std::to_string(image.height()) + ")");
+  const auto view = image.view();
+  std::vector<png_bytep> rows(std::size_t(view.height));
+  for (int y = 0; y < view.height; ++y)
+    // libpng takes non-const rows but does not write to them.
+    rows[std::size_t(y)] =
+        reinterpret_cast<png_bytep>(const_cast<T*>(view.data + std::size_t(y) * std::size_t(view.width)));
+
+  const std::string temporary = path + ".tmp";
+  Context context;
+  WriteStructs s;
+  s.png = png_create_write_struct(PNG_LIBPNG_VER_STRING, &context, on_error, on_warning);
+  if (s.png) s.info = png_create_info_struct(s.png);
+  if (!s.png || !s.info) fail(where, path, "cannot initialise libpng (out of memory or a libpng version mismatch)");
+
+  errno = 0;
+  File file(std::fopen(temporary.c_str(), "wb"));
+  if (!file) fail(where, path, "cannot open " + quoted(temporary) + " for writing: " + errno_text(errno));
+  errno = 0;
+  bool ok = write_rows(s.png, s.info, file.get(), png_uint_32(view.width), png_uint_32(view.height), 8 * int(sizeof(T)),
+                       rows.data());
+  std::string problem = ok ? "" : std::string(context.message) + (errno != 0 ? " (" + errno_text(errno) + ")" : "");
+  // Buffered data can still fail to reach the disk when the file is closed.
+  errno = 0;
+  if (ok && std::fflush(file.get()) != 0) {
+    ok = false;
+    problem = errno_text(errno != 0 ? errno : EIO);
+  }
+  errno = 0;
+  if (std::fclose(file.release()) != 0 && ok) {
+    ok = false;
+    problem = errno_text(errno != 0 ? errno : EIO);
+  }
+  if (!ok) {
+    std::remove(temporary.c_str());
+    fail(where, path, "cannot write " + quoted(temporary) + ": " + problem);
+  }
+  if (std::rename(temporary.c_str(), path.c_str()) != 0) {
+    const int error = errno;
+    std::remove(temporary.c_str());
+    fail(where, path, "cannot rename " + quoted(temporary) + " to it: " + errno_text(error));
+  }
+}
+
+}  // namespace detail::png
+
+/// Reads a grayscale PNG of 16 bits, or of 8 bits or fewer (values widened
+/// unchanged), e.g. a depth image or an instance-label mask.
+inline Image<std::uint16_t, Host> read_png_u16(const std::string& path) {
+  return detail::png::read_gray<std::uint16_t>(path, /*allow_narrower=*/true);
+}
+
+/// Reads a grayscale PNG of 8 bits or fewer (values unchanged); a 16-bit PNG
+/// is an error.
+inline Image<std::uint8_t, Host> read_png_u8(const std::string& path) {
+  return detail::png::read_gray<std::uint8_t>(path, /*allow_narrower=*/true);
+}
+
+/// Writes a 16-bit grayscale PNG. Throws std::invalid_argument for an empty
+/// image, std::runtime_error if the file cannot be written (any earlier file
+/// at `path` is then left as it was).
+inline void write_png(const std::string& path, const Image<std::uint16_t, Host>& image) {
+  detail::png::write_gray(path, image);
+}
+
+/// Writes an 8-bit grayscale PNG (see the 16-bit overload).
+inline void write_png(const std::string& path, const Image<std::uint8_t, Host>& image) {
+  detail::png::write_gray(path, image);
+}
+
+}  // namespace emfusion

@@ -1,0 +1,164 @@
+// Normal equations of a 6-DoF least-squares problem as a POD accumulator,
+// their backend-generic reduction over per-term residuals (with IRLS weights
+// from a robust norm), and a small dense solver for the 6x6 system.
+//
+// Accumulation is in double whatever the problem's scalar: a frame has ~3e5
+// terms, and float sums of that many squares lose the digits the solver needs.
+#pragma once
+
+#include <algorithm>
+#include <cmath>
+#include <concepts>
+#include <cstdint>
+
+#include "emfusion/core/backend.hpp"
+#include "emfusion/core/host_device.hpp"
+#include "emfusion/core/math.hpp"
+#include "emfusion/core/parallel.hpp"
+#include "emfusion/core/se3.hpp"
+#include "emfusion/robust/norms.hpp"
+
+namespace emfusion {
+
+/// H = sum w J^T J (upper triangle, row by row), g = sum w J^T r, the robust
+/// cost sum c rho(r) and the number of terms that contributed. When the
+/// linearisation was given a reference pose, `shared_cost` and
+/// `shared_reference_cost` hold the cost at the pose and at the reference over
+/// the terms valid at both, each term weighted with its fixed weight at the
+/// reference: solvers compare those, since terms entering or leaving the valid
+/// set (points crossing the map's border) and weights that change with the
+/// pose would otherwise make costs at two poses incomparable.
+struct NormalEquations6 {
+  double H[21];
+  double g[6];
+  double cost;
+  double terms;
+  double shared_cost;
+  double shared_reference_cost;
+
+  EMF_HD static NormalEquations6 zero() {
+    NormalEquations6 n{};
+    for (double& h : n.H) h = 0;
+    for (double& v : n.g) v = 0;
+    n.cost = 0, n.terms = 0, n.shared_cost = 0, n.shared_reference_cost = 0;
+    return n;
+  }
+  /// Adds one term: residual r with Jacobian J (d r / d xi), IRLS weight w
+  /// and cost contribution.
+  template <class S>
+  EMF_HD void add(const Vec6<S>& J, S r, S w, S cost_term) {
+    int k = 0;
+    for (int i = 0; i < 6; ++i) {
+      const double wj = double(w) * double(J[i]);
+      for (int j = i; j < 6; ++j) H[k++] += wj * double(J[j]);
+      g[i] += wj * double(r);
+    }
+    cost += double(cost_term);
+    terms += 1;
+  }
+  EMF_HD NormalEquations6& operator+=(const NormalEquations6& o) {
+    for (int i = 0; i < 21; ++i) H[i] += o.H[i];
+    for (int i = 0; i < 6; ++i) g[i] += o.g[i];
+    cost += o.cost, terms += o.terms;
+    shared_cost += o.shared_cost, shared_reference_cost += o.shared_reference_cost;
+    return *this;
+  }
+  /// The full symmetric 6x6 H.
+  EMF_HD Mat6<double> hessian() const {
+    Mat6<double> M{};
+    int k = 0;
+    for (int i = 0; i < 6; ++i)
+      for (int j = i; j < 6; ++j) M(i, j) = M(j, i) = H[k++];
+    return M;
+  }
+  EMF_HD Vec6<double> gradient() const { return Vec6<double>{{g[0], g[1], g[2], g[3], g[4], g[5]}}; }
+};
+
+struct SumNormalEquations {
+  EMF_HD NormalEquations6 operator()(NormalEquations6 a, const NormalEquations6& b) const { return a += b; }
+};
+
+/// A least-squares problem over a pose, one term per index: `term` gives the
+/// residual, its Jacobian with respect to a left perturbation exp(xi) * T and
+/// a fixed weight (>= 0), or false if the term does not take part at T.
+/// It is copied into kernels, so it holds views, not containers.
+template <class P, class S>
+concept PoseTerms = std::copy_constructible<P> && requires(const P& p, int i, const SE3<S>& T, S& r, Vec6<S>& J,
+                                                            S& w) {
+  { p.term_count() } -> std::convertible_to<int>;
+  { p.term(i, T, r, J, w) } -> std::convertible_to<bool>;
+};
+
+namespace detail {
+template <class S, class P, class N>
+struct LinearizeTerm {
+  P problem;
+  N norm;
+  SE3<S> T;
+  SE3<S> reference;
+  bool has_reference;
+  EMF_HD NormalEquations6 operator()(int i) const {
+    NormalEquations6 n = NormalEquations6::zero();
+    S r, w;
+    Vec6<S> J;
+    if (!problem.term(i, T, r, J, w) || !(w > S(0))) return n;
+    const S c = w * norm.cost(r);
+    n.add(J, r, w * norm.weight(r), c);
+    S r0, w0;
+    if (has_reference && problem.term(i, reference, r0, J, w0) && w0 > S(0)) {
+      // Both with the weight at the reference: IRLS holds weights fixed
+      // within a step, and weights that vary with the pose (the map
+      // confidence) would otherwise make the cost change disagree with g.
+      n.shared_cost = double(w0 * norm.cost(r));
+      n.shared_reference_cost = double(w0 * norm.cost(r0));
+    }
+    return n;
+  }
+};
+}  // namespace detail
+
+/// One IRLS linearisation at T: the robust norm's weights come from the
+/// residuals at T and multiply each term's fixed weight. With a reference
+/// pose, the shared costs (see NormalEquations6) are filled too.
+template <class S, Backend B, class P, class N>
+  requires PoseTerms<P, S> && RobustNorm<N, S>
+NormalEquations6 linearize(const B& backend, const P& problem, const N& norm, const SE3<S>& T,
+                           const SE3<S>* reference = nullptr) {
+  const detail::LinearizeTerm<S, P, N> f{problem, norm, T, reference ? *reference : T, reference != nullptr};
+  return transform_reduce_index(backend, problem.term_count(), f, NormalEquations6::zero(), SumNormalEquations{});
+}
+
+/// Solves (H + lambda I) x = -g by Cholesky; false if the matrix is not
+/// positive definite, judged relative to its largest diagonal entry.
+inline bool solve_damped(const NormalEquations6& n, double lambda, Vec6<double>& x) {
+  Mat6<double> A = n.hessian();
+  double scale = 0;
+  for (int i = 0; i < 6; ++i) A(i, i) += lambda, scale = std::max(scale, std::fabs(A(i, i)));
+  const double tiny = 1e-12 * scale;
+  Mat6<double> L = Mat6<double>::zero();
+  for (int j = 0; j < 6; ++j) {
+    double d = A(j, j);
+    for (int k = 0; k < j; ++k) d -= L(j, k) * L(j, k);
+    if (!(d > tiny) || !(d > 0)) return false;
+    L(j, j) = std::sqrt(d);
+    for (int i = j + 1; i < 6; ++i) {
+      double s = A(i, j);
+      for (int k = 0; k < j; ++k) s -= L(i, k) * L(j, k);
+      L(i, j) = s / L(j, j);
+    }
+  }
+  Vec6<double> y;
+  for (int i = 0; i < 6; ++i) {
+    double s = -n.g[i];
+    for (int k = 0; k < i; ++k) s -= L(i, k) * y[k];
+    y[i] = s / L(i, i);
+  }
+  for (int i = 5; i >= 0; --i) {
+    double s = y[i];
+    for (int k = i + 1; k < 6; ++k) s -= L(k, i) * x[k];
+    x[i] = s / L(i, i);
+  }
+  return true;
+}
+
+}  // namespace emfusion

@@ -1,0 +1,106 @@
+// Direct alignment of a depth image with a TSDF volume (paper eq. 8/9,
+// after Bylow et al. 2013): per pixel, the residual is the SDF value of the
+// measured point moved into the volume, r = psi(T_volume_camera * p), with
+// Jacobian d r / d xi = grad psi^T [I | -hat(x)] for a left perturbation of
+// T_volume_camera. Each term is weighted by the pixel's association
+// likelihood q(u) and the normalised map confidence W(x) / W_norm; the
+// robust norm's IRLS weight comes on top (solve/normal_equations.hpp). Each
+// weight can be switched off, as the paper's ablations need.
+#pragma once
+
+#include <cmath>
+
+#include "emfusion/core/image.hpp"
+#include "emfusion/core/se3.hpp"
+#include "emfusion/robust/norms.hpp"
+#include "emfusion/solve/normal_equations.hpp"
+#include "emfusion/solve/solvers.hpp"
+#include "emfusion/volume/tsdf_volume.hpp"
+
+namespace emfusion {
+
+template <class S>
+struct SdfAlignmentParams {
+  bool use_association = true;     ///< weight terms by q(u) (needs an association image)
+  bool use_map_confidence = true;  ///< weight terms by W(x) / confidence_normalizer
+  /// W_norm: the map's weight cap W_max, so that confidence reaches 1 where the
+  /// map is saturated (the paper normalises by the largest W in the frame,
+  /// which equals W_max once the map is mature).
+  S confidence_normalizer = S(64);
+  int pixel_stride = 1;  ///< use every n-th pixel in x and y
+};
+
+/// The per-pixel terms of SDF alignment (a PoseTerms problem over
+/// T_volume_camera). Holds views: valid while the volume and images live.
+template <class S, class Store = S>
+struct SdfAlignmentTerms {
+  TsdfView<S, const Store> volume;
+  ImageView<const Vec3<S>> points;  ///< camera frame; non-finite = no point
+  ImageView<const S> association;   ///< q(u); empty = 1 everywhere
+  S confidence_scale = S(0);        ///< 1 / W_norm; 0 = map confidence off
+  int stride = 1;
+
+  EMF_HD int term_count() const {
+    return ((points.width + stride - 1) / stride) * ((points.height + stride - 1) / stride);
+  }
+  EMF_HD bool term(int i, const SE3<S>& T_volume_camera, S& r, Vec6<S>& J, S& w) const {
+    const int columns = (points.width + stride - 1) / stride;
+    const int u = (i % columns) * stride, v = (i / columns) * stride;
+    const int pixel = v * points.width + u;
+    const Vec3<S> p = points[pixel];
+    if (!(std::isfinite(p.x()) && std::isfinite(p.y()) && std::isfinite(p.z()))) return false;
+    S q = association.empty() ? S(1) : association[pixel];
+    if (!(q > S(0))) return false;
+    const Vec3<S> x = T_volume_camera * p;
+    Vec3<S> g;
+    S W;
+    if (!volume.sample_with_gradient(x, r, g, &W)) return false;
+    if (confidence_scale > S(0)) q *= (W * confidence_scale < S(1) ? W * confidence_scale : S(1));
+    const Vec3<S> xg = cross(x, g);
+    J = Vec6<S>{{g.x(), g.y(), g.z(), xg.x(), xg.y(), xg.z()}};
+    w = q;
+    return true;
+  }
+};
+
+/// Builds the terms for a volume, a vertex map (camera frame) and an optional
+/// association image of the same size.
+template <class S, Backend B, class Store>
+SdfAlignmentTerms<S, Store> make_sdf_alignment(const TsdfVolume<S, B, Store>& volume,
+                                               const Image<Vec3<S>, B>& points, const Image<S, B>* association,
+                                               const SdfAlignmentParams<S>& params = {}) {
+  constexpr const char* where = "make_sdf_alignment";
+  detail::require(!points.empty(), where, "the vertex map is empty");
+  if (params.use_association && association)
+    detail::require_image(association->view(), points.width(), points.height(), where, "association image");
+  detail::require(params.pixel_stride >= 1, where, "pixel_stride must be at least 1");
+  detail::require(!params.use_map_confidence || params.confidence_normalizer > S(0), where,
+                  "confidence_normalizer must be positive");
+  SdfAlignmentTerms<S, Store> t;
+  t.volume = volume.view();
+  t.points = points.view();
+  if (params.use_association && association) t.association = association->view();
+  t.confidence_scale = params.use_map_confidence ? S(1) / params.confidence_normalizer : S(0);
+  t.stride = params.pixel_stride;
+  return t;
+}
+
+/// Tracks a camera against a volume: minimises the robust SDF alignment cost
+/// over T_world_camera with Levenberg-Marquardt, starting at `T_world_camera`.
+template <class S, Backend B, class Store, class Norm>
+  requires RobustNorm<Norm, S>
+SE3<S> align_to_volume(const TsdfVolume<S, B, Store>& volume, const Image<Vec3<S>, B>& points,
+                       const Image<S, B>* association, const SE3<S>& T_world_camera, const Norm& norm,
+                       const SdfAlignmentParams<S>& params = {}, const LevenbergMarquardtParams& lm = {},
+                       SolveReport* report = nullptr) {
+  const auto terms = make_sdf_alignment(volume, points, association, params);
+  const B& backend = volume.backend();
+  const auto lin = [&](const SE3<S>& T_volume_camera, const SE3<S>* reference) {
+    return linearize(backend, terms, norm, T_volume_camera, reference);
+  };
+  const SE3<S> T_volume_camera =
+      levenberg_marquardt(lin, volume.pose().inverse() * T_world_camera, lm, report);
+  return volume.pose() * T_volume_camera;
+}
+
+}  // namespace emfusion

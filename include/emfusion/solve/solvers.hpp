@@ -1,0 +1,220 @@
+// Gauss-Newton and Levenberg-Marquardt on SE(3).
+//
+// A solver sees the problem only as a callable `linearize(T, reference)`
+// returning the NormalEquations6 at pose T (residuals, IRLS weights and cost
+// included; with a non-null reference pose also the costs over the terms
+// valid at both poses), so the same solvers serve any problem, robust norm and
+// backend. Updates are left-multiplied: T <- exp(xi) * T. Each solve fills a
+// SolveReport.
+//
+// Levenberg-Marquardt follows Madsen, Nielsen & Tingleff (2004): initial
+// damping tau * max(diag H), gain ratio test, damping scaled by
+// max(1/3, 1 - (2 rho - 1)^3) after a success and by nu (doubling) after a
+// failure; it stops when |g|_inf <= eps1, when the step is below
+// eps2 (|xi(T)| + eps2), or after max_iterations linearisations.
+#pragma once
+
+#include <algorithm>
+#include <cmath>
+#include <concepts>
+#include <limits>
+#include <string>
+
+#include "emfusion/core/se3.hpp"
+#include "emfusion/solve/normal_equations.hpp"
+
+namespace emfusion {
+
+enum class StopReason {
+  gradient_small,   ///< |g|_inf <= eps1: at a stationary point
+  step_small,       ///< the step fell below eps2: converged
+  max_iterations,   ///< ran out of iterations
+  too_few_terms,    ///< fewer than `min_terms` terms at the start: nothing to solve
+  not_finite,       ///< the normal equations contained NaN or inf
+  singular,         ///< the system could not be solved even with damping
+};
+
+inline const char* to_string(StopReason r) {
+  switch (r) {
+    case StopReason::gradient_small: return "gradient_small";
+    case StopReason::step_small: return "step_small";
+    case StopReason::max_iterations: return "max_iterations";
+    case StopReason::too_few_terms: return "too_few_terms";
+    case StopReason::not_finite: return "not_finite";
+    case StopReason::singular: return "singular";
+  }
+  return "unknown";
+}
+
+struct SolveReport {
+  int iterations = 0;          ///< linearisations after the first
+  int accepted_steps = 0;
+  double initial_cost = 0;
+  double final_cost = 0;
+  double terms = 0;            ///< terms at the final pose
+  StopReason reason = StopReason::max_iterations;
+
+  /// True when the solver stopped at a solution (not for lack of data).
+  bool converged() const {
+    return reason == StopReason::gradient_small || reason == StopReason::step_small ||
+           reason == StopReason::max_iterations;
+  }
+};
+
+/// Defaults are the reference implementation's (shared/PARAMETERS.md).
+struct LevenbergMarquardtParams {
+  int max_iterations = 100;
+  double tau = 1e3;
+  double eps1 = 1e-8;
+  double eps2 = 1e-8;
+  double nu = 2;
+  double min_terms = 6;
+  /// Floor of the damping, relative to the largest diagonal entry of H: keeps
+  /// steps bounded along directions the data cannot observe (a single plane).
+  double min_damping = 1e-6;
+};
+
+struct GaussNewtonParams {
+  int max_iterations = 20;
+  double eps2 = 1e-8;
+  double min_terms = 6;
+};
+
+template <class F, class S>
+concept Linearizer = requires(F f, const SE3<S>& T, const SE3<S>* reference) {
+  { f(T, reference) } -> std::convertible_to<NormalEquations6>;
+};
+
+namespace detail {
+inline bool finite(const NormalEquations6& n) {
+  for (double h : n.H)
+    if (!std::isfinite(h)) return false;
+  for (double v : n.g)
+    if (!std::isfinite(v)) return false;
+  return std::isfinite(n.cost);
+}
+inline double max_diagonal(const NormalEquations6& n) {
+  const Mat6<double> H = n.hessian();
+  double m = 0;
+  for (int i = 0; i < 6; ++i) m = std::max(m, H(i, i));
+  return m;
+}
+inline double max_abs(const double* v, int n) {
+  double m = 0;
+  for (int i = 0; i < n; ++i) m = std::max(m, std::fabs(v[i]));
+  return m;
+}
+/// The step below which a solve has converged: eps2 (|xi(T)| + eps2), but
+/// never below what the scalar S can resolve.
+template <class S>
+double step_norm_limit(const SE3<S>& T, double eps2) {
+  const double x = norm(T.template cast<double>().log());
+  return std::max(eps2 * (x + eps2), 10.0 * double(std::numeric_limits<S>::epsilon()) * (x + 1.0));
+}
+/// Common start: linearise at T0 and check there is something to solve.
+inline bool start(const NormalEquations6& n, double min_terms, SolveReport& report) {
+  report.initial_cost = report.final_cost = n.cost;
+  report.terms = n.terms;
+  if (!finite(n)) {
+    report.reason = StopReason::not_finite;
+    return false;
+  }
+  if (n.terms < min_terms) {
+    report.reason = StopReason::too_few_terms;
+    return false;
+  }
+  return true;
+}
+}  // namespace detail
+
+/// Minimises the problem behind `linearize` starting at T; returns the pose.
+template <class S, class F>
+  requires Linearizer<F, S>
+SE3<S> levenberg_marquardt(F&& linearize, SE3<S> T, const LevenbergMarquardtParams& p = {},
+                           SolveReport* report_out = nullptr) {
+  SolveReport report;
+  NormalEquations6 n = linearize(T, static_cast<const SE3<S>*>(nullptr));
+  if (detail::start(n, p.min_terms, report)) {
+    double mu = p.tau * detail::max_diagonal(n);
+    double nu = p.nu;
+    report.reason = StopReason::max_iterations;
+    while (report.iterations < p.max_iterations) {
+      if (detail::max_abs(n.g, 6) <= p.eps1) {
+        report.reason = StopReason::gradient_small;
+        break;
+      }
+      Vec6<double> xi;
+      if (!solve_damped(n, mu, xi)) {
+        report.reason = StopReason::singular;
+        break;
+      }
+      if (norm(xi) <= detail::step_norm_limit(T, p.eps2)) {
+        report.reason = StopReason::step_small;
+        break;
+      }
+      const SE3<S> T_new = SE3<S>::exp(xi.template cast<S>()) * T;
+      const NormalEquations6 n_new = linearize(T_new, &T);
+      ++report.iterations;
+      // Predicted decrease of the quadratic model: xi^T (mu xi - g) / 2,
+      // against the actual decrease over the terms valid at both poses.
+      double predicted = 0;
+      for (int i = 0; i < 6; ++i) predicted += xi[i] * (mu * xi[i] - n.g[i]);
+      predicted *= 0.5;
+      const double rho = detail::finite(n_new) && n_new.terms >= p.min_terms && predicted > 0
+                             ? (n_new.shared_reference_cost - n_new.shared_cost) / predicted
+                             : -1.0;
+      if (rho > 0) {
+        T = T_new;
+        n = n_new;
+        ++report.accepted_steps;
+        const double a = 2 * rho - 1;
+        mu *= std::max(1.0 / 3.0, 1.0 - a * a * a);
+        mu = std::max(mu, p.min_damping * detail::max_diagonal(n));
+        nu = p.nu;
+      } else {
+        mu *= nu;
+        nu *= 2;
+      }
+    }
+  }
+  report.final_cost = n.cost;
+  report.terms = n.terms;
+  if (report_out) *report_out = report;
+  return T;
+}
+
+/// Plain Gauss-Newton: every step accepted; stops on a small step.
+template <class S, class F>
+  requires Linearizer<F, S>
+SE3<S> gauss_newton(F&& linearize, SE3<S> T, const GaussNewtonParams& p = {}, SolveReport* report_out = nullptr) {
+  SolveReport report;
+  const SE3<S>* no_reference = nullptr;
+  NormalEquations6 n = linearize(T, no_reference);
+  if (detail::start(n, p.min_terms, report)) {
+    report.reason = StopReason::max_iterations;
+    while (report.iterations < p.max_iterations) {
+      Vec6<double> xi;
+      if (!solve_damped(n, 0.0, xi)) {
+        report.reason = StopReason::singular;
+        break;
+      }
+      T = SE3<S>::exp(xi.template cast<S>()) * T;
+      n = linearize(T, no_reference);
+      ++report.iterations, ++report.accepted_steps;
+      if (!detail::finite(n)) {
+        report.reason = StopReason::not_finite;
+        break;
+      }
+      if (norm(xi) <= detail::step_norm_limit(T, p.eps2)) {
+        report.reason = StopReason::step_small;
+        break;
+      }
+    }
+  }
+  report.final_cost = n.cost;
+  report.terms = n.terms;
+  if (report_out) *report_out = report;
+  return T;
+}
+
+}  // namespace emfusion

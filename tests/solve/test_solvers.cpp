@@ -1,0 +1,123 @@
+// Gauss-Newton and Levenberg-Marquardt on a problem with a known answer
+// (point-to-point alignment), their reports and their failure modes.
+#include <cmath>
+#include <limits>
+#include <random>
+#include <vector>
+
+#include "emfusion/core/image.hpp"
+#include "emfusion/solve/normal_equations.hpp"
+#include "emfusion/solve/solvers.hpp"
+#include "support/catch.hpp"
+#include "support/configs.hpp"
+
+using namespace emfusion;
+
+namespace {
+
+/// Three scalar terms per point: (T * source - target)[axis].
+template <class S>
+struct PointToPoint {
+  ImageView<const Vec3<S>> source, target;
+  EMF_HD int term_count() const { return 3 * source.size(); }
+  EMF_HD bool term(int i, const SE3<S>& T, S& r, Vec6<S>& J, S& w) const {
+    const int k = i / 3, axis = i % 3;
+    const Vec3<S> x = T * source[k];
+    r = x[axis] - target[k][axis];
+    const auto Jx = SE3<S>::left_jacobian_of_action(x);
+    for (int j = 0; j < 6; ++j) J[j] = Jx(axis, j);
+    w = S(1);
+    return true;
+  }
+};
+
+template <class S, class B>
+struct Fixture {
+  Image<Vec3<S>, B> source, target;
+  SE3<S> truth;
+  Fixture(int n, unsigned seed) {
+    std::mt19937 rng(seed);
+    std::uniform_real_distribution<double> u(-1, 1);
+    std::vector<Vec3<S>> s, t;
+    truth = SE3<S>::exp(Vec6<S>{{S(0.3), S(-0.2), S(0.1), S(0.4), S(-0.3), S(0.2)}});
+    for (int i = 0; i < n; ++i) {
+      s.push_back(vec3(S(u(rng)), S(u(rng)), S(2 + u(rng))));
+      t.push_back(truth * s.back());
+    }
+    source = Image<Vec3<S>, Host>::from_host(n, 1, s).template to<B>();
+    target = Image<Vec3<S>, Host>::from_host(n, 1, t).template to<B>();
+  }
+  PointToPoint<S> problem() const { return {source.view(), target.view()}; }
+};
+
+template <class S>
+double pose_error(const SE3<S>& a, const SE3<S>& b) {
+  return double(max_abs_diff(a.matrix(), b.matrix()));
+}
+
+}  // namespace
+
+TEMPLATE_LIST_TEST_CASE("Solvers recover a known pose", "[solve]", emfusion::test::AllConfigs) {
+  using S = typename TestType::Scalar;
+  using B = typename TestType::Backend;
+  const Fixture<S, B> f(200, 1);
+  const auto problem = f.problem();
+  const B backend{};
+  const auto lin = [&](const SE3<S>& T, const SE3<S>* ref) { return linearize(backend, problem, L2Norm<S>{}, T, ref); };
+  // LM stops once its step is below eps2 = 1e-8 (relative): that bounds the accuracy.
+  const double tol = sizeof(S) <= 4 ? 2e-5 : 1e-8;
+
+  SolveReport lm_report;
+  const SE3<S> lm = levenberg_marquardt(lin, SE3<S>::identity(), {}, &lm_report);
+  INFO("LM: " << lm_report.iterations << " iterations, stop " << to_string(lm_report.reason));
+  CHECK(pose_error(lm, f.truth) < tol);
+  CHECK(lm_report.converged());
+  CHECK(lm_report.final_cost < 1e-6 * lm_report.initial_cost);
+  CHECK(lm_report.terms == 600);
+  CHECK(lm_report.iterations > 0);
+
+  SolveReport gn_report;
+  const SE3<S> gn = gauss_newton(lin, SE3<S>::identity(), {}, &gn_report);
+  CHECK(pose_error(gn, f.truth) < tol);
+  CHECK(gn_report.iterations <= 10);  // quadratic convergence on a zero-residual problem
+}
+
+TEMPLATE_LIST_TEST_CASE("Solvers report why they could not solve", "[solve]", emfusion::test::AllConfigs) {
+  using S = typename TestType::Scalar;
+  using B = typename TestType::Backend;
+  const B backend{};
+  // One point gives 3 terms: fewer than the 6 unknowns.
+  const Fixture<S, B> one(1, 2);
+  const auto p1 = one.problem();
+  SolveReport report;
+  const SE3<S> start = SE3<S>::translation(vec3(S(0.1), S(0), S(0)));
+  const SE3<S> T = levenberg_marquardt([&](const SE3<S>& X, const SE3<S>* ref) { return linearize(backend, p1, L2Norm<S>{}, X, ref); },
+                                       start, {}, &report);
+  CHECK(report.reason == StopReason::too_few_terms);
+  CHECK(!report.converged());
+  CHECK(pose_error(T, start) == 0.0);
+
+  // A NaN in the data is reported, not iterated on.
+  std::vector<Vec3<S>> pts(10, vec3(S(1), S(2), S(3)));
+  pts[4] = Vec3<S>::constant(std::numeric_limits<S>::quiet_NaN());
+  const auto src = Image<Vec3<S>, Host>::from_host(10, 1, pts).template to<B>();
+  const PointToPoint<S> p2{src.view(), src.view()};
+  levenberg_marquardt([&](const SE3<S>& X, const SE3<S>* ref) { return linearize(backend, p2, L2Norm<S>{}, X, ref); },
+                      SE3<S>::identity(), {},
+                      &report);
+  CHECK(report.reason == StopReason::not_finite);
+
+  // All points equal: rotations about the point are unobservable. GN cannot
+  // solve the singular system; LM's damping keeps the step finite.
+  std::vector<Vec3<S>> same(10, vec3(S(0.5), S(0.5), S(2)));
+  const auto s3 = Image<Vec3<S>, Host>::from_host(10, 1, same).template to<B>();
+  std::vector<Vec3<S>> moved(10, vec3(S(0.6), S(0.5), S(2)));
+  const auto t3 = Image<Vec3<S>, Host>::from_host(10, 1, moved).template to<B>();
+  const PointToPoint<S> p3{s3.view(), t3.view()};
+  const auto lin3 = [&](const SE3<S>& X, const SE3<S>* ref) { return linearize(backend, p3, L2Norm<S>{}, X, ref); };
+  gauss_newton(lin3, SE3<S>::identity(), {}, &report);
+  CHECK(report.reason == StopReason::singular);
+  const SE3<S> damped = levenberg_marquardt(lin3, SE3<S>::identity(), {}, &report);
+  CHECK(report.converged());
+  CHECK(double(norm(damped * vec3(S(0.5), S(0.5), S(2)) - vec3(S(0.6), S(0.5), S(2)))) < 1e-3);
+}
