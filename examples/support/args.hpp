@@ -2,6 +2,7 @@
 // parsing with messages that name the flag and the bad value.
 #pragma once
 
+#include <cmath>
 #include <cstdlib>
 #include <stdexcept>
 #include <string>
@@ -17,6 +18,15 @@ inline int parse_positive_int(const std::string& flag, const std::string& value,
     throw std::invalid_argument(flag + " expects an integer from 1 to " + std::to_string(max) + ", got '" + value +
                                 "'");
   return int(v);
+}
+
+/// The value of `flag` as a finite positive number; throws naming the flag.
+inline double parse_positive_double(const std::string& flag, const std::string& value) {
+  char* end = nullptr;
+  const double v = std::strtod(value.c_str(), &end);
+  if (value.empty() || *end != '\0' || !(v > 0) || !std::isfinite(v))
+    throw std::invalid_argument(flag + " expects a positive number, got '" + value + "'");
+  return v;
 }
 
 }  // namespace emfusion::examples

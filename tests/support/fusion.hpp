@@ -44,14 +44,17 @@ VolumeGeometry<S> cube_around(const Vec3<S>& center, int n, S voxel) {
   return g;
 }
 
+/// Renders and integrates every pose; clean synthetic depth, so by default
+/// with the refined update (IntegrationParams::refined()).
 template <class S, class B>
 void fuse_views(TsdfVolume<S, B>& volume, const sim::Scene<S>& scene, const PinholeCamera<S>& camera,
-                const std::vector<SE3<S>>& poses) {
+                const std::vector<SE3<S>>& poses,
+                const IntegrationParams<S>& params = IntegrationParams<S>::refined()) {
   Image<S, B> depth;
   for (const auto& T_world_camera : poses) {
     sim::render_depth(scene, camera, T_world_camera, depth, static_cast<Image<int, B>*>(nullptr), {},
                       volume.backend());
-    integrate(volume, depth, camera, T_world_camera);
+    integrate(volume, depth, camera, T_world_camera, static_cast<const Image<S, B>*>(nullptr), params);
   }
 }
 

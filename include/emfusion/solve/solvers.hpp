@@ -4,8 +4,10 @@
 // returning the NormalEquations6 at pose T (residuals, IRLS weights and cost
 // included; with a non-null reference pose also the costs over the terms
 // valid at both poses), so the same solvers serve any problem, robust norm and
-// backend. Updates are left-multiplied: T <- exp(xi) * T. Each solve fills a
-// SolveReport.
+// backend. Updates are left-multiplied: T <- exp(xi) * T, accumulated in
+// double whatever the problem's scalar (a float pose several metres from its
+// volume's origin resolves only ~2e-7 m), and the problem is linearised at
+// the pose rounded to its scalar. Each solve fills a SolveReport.
 //
 // Levenberg-Marquardt follows Madsen, Nielsen & Tingleff (2004): initial
 // damping tau * max(diag H), gain ratio test, damping scaled by
@@ -27,7 +29,7 @@ namespace emfusion {
 
 enum class StopReason {
   gradient_small,   ///< |g|_inf <= eps1: at a stationary point
-  step_small,       ///< the step fell below eps2: converged
+  step_small,       ///< the step fell below eps2 or below the scalar's resolution: converged
   max_iterations,   ///< ran out of iterations
   too_few_terms,    ///< fewer than `min_terms` terms at the start: nothing to solve
   not_finite,       ///< the normal equations contained NaN or inf
@@ -104,12 +106,17 @@ inline double max_abs(const double* v, int n) {
   for (int i = 0; i < n; ++i) m = std::max(m, std::fabs(v[i]));
   return m;
 }
-/// The step below which a solve has converged: eps2 (|xi(T)| + eps2), but
-/// never below what the scalar S can resolve.
+/// The step below which a solve has converged: eps2 (|xi(T)| + eps2).
 template <class S>
 double step_norm_limit(const SE3<S>& T, double eps2) {
   const double x = norm(T.template cast<double>().log());
-  return std::max(eps2 * (x + eps2), 10.0 * double(std::numeric_limits<S>::epsilon()) * (x + 1.0));
+  return eps2 * (x + eps2);
+}
+/// True if applying a step left the pose unchanged in S: the step is below
+/// what the scalar resolves (in float long before eps2 is reached).
+template <class S>
+bool unchanged(const SE3<S>& a, const SE3<S>& b) {
+  return max_abs_diff(a.matrix(), b.matrix()) == S(0);
 }
 /// Common start: linearise at T0 and check there is something to solve.
 inline bool start(const NormalEquations6& n, double min_terms, SolveReport& report) {
@@ -130,10 +137,12 @@ inline bool start(const NormalEquations6& n, double min_terms, SolveReport& repo
 /// Minimises the problem behind `linearize` starting at T; returns the pose.
 template <class S, class F>
   requires Linearizer<F, S>
-SE3<S> levenberg_marquardt(F&& linearize, SE3<S> T, const LevenbergMarquardtParams& p = {},
+SE3<S> levenberg_marquardt(F&& linearize, const SE3<S>& start, const LevenbergMarquardtParams& p = {},
                            SolveReport* report_out = nullptr) {
   SolveReport report;
-  NormalEquations6 n = linearize(T, static_cast<const SE3<S>*>(nullptr));
+  SE3<double> T = start.template cast<double>();
+  SE3<S> T_s = start;
+  NormalEquations6 n = linearize(T_s, static_cast<const SE3<S>*>(nullptr));
   if (detail::start(n, p.min_terms, report)) {
     double mu = p.tau * detail::max_diagonal(n);
     double nu = p.nu;
@@ -152,8 +161,13 @@ SE3<S> levenberg_marquardt(F&& linearize, SE3<S> T, const LevenbergMarquardtPara
         report.reason = StopReason::step_small;
         break;
       }
-      const SE3<S> T_new = SE3<S>::exp(xi.template cast<S>()) * T;
-      const NormalEquations6 n_new = linearize(T_new, &T);
+      const SE3<double> T_new = SE3<double>::exp(xi) * T;
+      const SE3<S> T_new_s = T_new.template cast<S>();
+      if (detail::unchanged(T_new_s, T_s)) {
+        report.reason = StopReason::step_small;
+        break;
+      }
+      const NormalEquations6 n_new = linearize(T_new_s, &T_s);
       ++report.iterations;
       // Predicted decrease of the quadratic model: xi^T (mu xi - g) / 2,
       // against the actual decrease over the terms valid at both poses.
@@ -164,7 +178,7 @@ SE3<S> levenberg_marquardt(F&& linearize, SE3<S> T, const LevenbergMarquardtPara
                              ? (n_new.shared_reference_cost - n_new.shared_cost) / predicted
                              : -1.0;
       if (rho > 0) {
-        T = T_new;
+        T = T_new, T_s = T_new_s;
         n = n_new;
         ++report.accepted_steps;
         const double a = 2 * rho - 1;
@@ -180,16 +194,19 @@ SE3<S> levenberg_marquardt(F&& linearize, SE3<S> T, const LevenbergMarquardtPara
   report.final_cost = n.cost;
   report.terms = n.terms;
   if (report_out) *report_out = report;
-  return T;
+  return T_s;
 }
 
 /// Plain Gauss-Newton: every step accepted; stops on a small step.
 template <class S, class F>
   requires Linearizer<F, S>
-SE3<S> gauss_newton(F&& linearize, SE3<S> T, const GaussNewtonParams& p = {}, SolveReport* report_out = nullptr) {
+SE3<S> gauss_newton(F&& linearize, const SE3<S>& start, const GaussNewtonParams& p = {},
+                    SolveReport* report_out = nullptr) {
   SolveReport report;
   const SE3<S>* no_reference = nullptr;
-  NormalEquations6 n = linearize(T, no_reference);
+  SE3<double> T = start.template cast<double>();
+  SE3<S> T_s = start;
+  NormalEquations6 n = linearize(T_s, no_reference);
   if (detail::start(n, p.min_terms, report)) {
     report.reason = StopReason::max_iterations;
     while (report.iterations < p.max_iterations) {
@@ -198,14 +215,24 @@ SE3<S> gauss_newton(F&& linearize, SE3<S> T, const GaussNewtonParams& p = {}, So
         report.reason = StopReason::singular;
         break;
       }
-      T = SE3<S>::exp(xi.template cast<S>()) * T;
-      n = linearize(T, no_reference);
+      const SE3<double> T_new = SE3<double>::exp(xi) * T;
+      const SE3<S> T_new_s = T_new.template cast<S>();
+      if (detail::unchanged(T_new_s, T_s)) {
+        report.reason = StopReason::step_small;
+        break;
+      }
+      T = T_new, T_s = T_new_s;
+      n = linearize(T_s, no_reference);
       ++report.iterations, ++report.accepted_steps;
       if (!detail::finite(n)) {
         report.reason = StopReason::not_finite;
         break;
       }
-      if (norm(xi) <= detail::step_norm_limit(T, p.eps2)) {
+      // Undamped steps settle at the noise of the scalar's arithmetic rather
+      // than at eps2 in float: stop there too.
+      const double resolution = 10.0 * double(std::numeric_limits<S>::epsilon()) *
+                                (norm(T.log()) + 1.0);
+      if (norm(xi) <= std::max(detail::step_norm_limit(T, p.eps2), resolution)) {
         report.reason = StopReason::step_small;
         break;
       }
@@ -214,7 +241,7 @@ SE3<S> gauss_newton(F&& linearize, SE3<S> T, const GaussNewtonParams& p = {}, So
   report.final_cost = n.cost;
   report.terms = n.terms;
   if (report_out) *report_out = report;
-  return T;
+  return T_s;
 }
 
 }  // namespace emfusion

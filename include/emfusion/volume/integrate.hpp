@@ -9,8 +9,8 @@
 // Voxels in free space (d >= truncation) are updated with weight 1 whatever
 // q(u) is, so that a surface that moved away is carved out of every model.
 //
-// Three refinements of the plain projective update, each on by default and
-// switchable (docs/decisions.md has the measurements behind them):
+// Refinements of the plain projective update, all off by default and on in
+// IntegrationParams::refined() (docs/decisions.md has the measurements):
 // - point-to-plane distance (Bylow et al. 2013, the paper's [4]): d is the
 //   ray distance times the cosine of the incidence angle, i.e. the distance
 //   to the observed surface's tangent plane, also when deciding free space;
@@ -41,18 +41,32 @@
 
 namespace emfusion {
 
+/// Defaults are the paper's update (eq. 10) with the reference parameters;
+/// `refined()` switches on the refinements described above.
 template <class S>
 struct IntegrationParams {
   S max_weight = S(64);          ///< W_max
   S free_space_weight = S(1);    ///< update weight of voxels with d >= truncation
-  bool behind_surface_falloff = true;
-  bool weight_by_incidence = true;
+  bool behind_surface_falloff = false;
+  bool weight_by_incidence = false;
   S min_incidence_weight = S(0.05);  ///< floor of the incidence weight
-  bool point_to_plane = true;  ///< distance to the tangent plane instead of along the ray
-  S silhouette_guard = S(1.5);  ///< voxels (lateral); 0 turns the guard off
+  bool point_to_plane = false;       ///< distance to the tangent plane instead of along the ray
+  S silhouette_guard = S(0);         ///< voxels (lateral); 0 turns the guard off
   /// Depth of the band updated behind a surface, as a fraction of the
   /// truncation (1 = the symmetric band of the paper).
-  S behind_band = S(0.3);
+  S behind_band = S(1);
+
+  /// The refinements for accurate geometry from clean depth (synthetic data,
+  /// multi-view scans): within one voxel of the true surface where the
+  /// paper's update is off by up to four (docs/decisions.md). On noisy
+  /// Kinect depth they cost camera-tracking accuracy, hence not the default.
+  static IntegrationParams refined() {
+    IntegrationParams p;
+    p.behind_surface_falloff = p.weight_by_incidence = p.point_to_plane = true;
+    p.silhouette_guard = S(1.5);
+    p.behind_band = S(0.3);
+    return p;
+  }
 };
 
 namespace detail {
