@@ -6,7 +6,8 @@
 //
 //   track_camera <sequence-dir> <trajectory.txt> [--backend cpu|cuda]
 //                [--max-frames N] [--voxels N] [--voxel-size M] [--stride N] [--tau T]
-//                [--integration paper|refined] [--behind-band F] [--verbose]
+//                [--integration paper|refined] [--behind-band F] [--central-gradient]
+//                [--verbose]
 #include <chrono>
 #include <cstdio>
 #include <stdexcept>
@@ -28,7 +29,7 @@ namespace {
 struct Options {
   std::string sequence, output, backend = "cpu";
   int max_frames = 0, voxels = 512, stride = 1;
-  bool verbose = false;
+  bool verbose = false, central_gradient = false;
   double voxel_size = 0.01;
   double tau = LevenbergMarquardtParams{}.tau;
   std::string integration = "paper";
@@ -51,6 +52,7 @@ void track(const Options& o) {
   const HuberNorm<S> huber{S(2) * volume.voxel_size()};
   SdfAlignmentParams<S> align;
   align.pixel_stride = o.stride;
+  align.central_gradient = o.central_gradient;
   LevenbergMarquardtParams lm;
   lm.tau = o.tau;
   IntegrationParams<S> fusion = o.integration == "refined" ? IntegrationParams<S>::refined() : IntegrationParams<S>{};
@@ -99,8 +101,8 @@ Options parse(int argc, char** argv) {
       positional.push_back(a);
       continue;
     }
-    if (a == "--verbose") {
-      o.verbose = true;
+    if (a == "--verbose" || a == "--central-gradient") {
+      (a == "--verbose" ? o.verbose : o.central_gradient) = true;
       continue;
     }
     if (i + 1 >= argc) throw std::invalid_argument("missing value after '" + a + "'");
@@ -120,7 +122,7 @@ Options parse(int argc, char** argv) {
   }
   if (positional.size() != 2)
     throw std::invalid_argument("usage: track_camera <sequence-dir> <trajectory.txt> [--backend cpu|cuda] "
-                                "[--max-frames N] [--voxels N] [--voxel-size M] [--stride N] [--tau T] [--integration paper|refined] [--behind-band F] [--verbose]");
+                                "[--max-frames N] [--voxels N] [--voxel-size M] [--stride N] [--tau T] [--integration paper|refined] [--behind-band F] [--central-gradient] [--verbose]");
   o.sequence = positional[0], o.output = positional[1];
   return o;
 }

@@ -28,6 +28,10 @@ struct SdfAlignmentParams {
   /// which equals W_max once the map is mature).
   S confidence_normalizer = S(64);
   int pixel_stride = 1;  ///< use every n-th pixel in x and y
+  /// Jacobian from the SDF gradient by central differences one voxel apart
+  /// (smoother across voxel cells, six more samples per pixel) instead of the
+  /// exact gradient of the trilinear interpolant.
+  bool central_gradient = false;
 };
 
 /// The per-pixel terms of SDF alignment (a PoseTerms problem over
@@ -39,6 +43,7 @@ struct SdfAlignmentTerms {
   ImageView<const S> association;   ///< q(u); empty = 1 everywhere
   S confidence_scale = S(0);        ///< 1 / W_norm; 0 = map confidence off
   int stride = 1;
+  bool central_gradient = false;
 
   EMF_HD int term_count() const {
     return ((points.width + stride - 1) / stride) * ((points.height + stride - 1) / stride);
@@ -55,6 +60,7 @@ struct SdfAlignmentTerms {
     Vec3<S> g;
     S W;
     if (!volume.sample_with_gradient(x, r, g, &W)) return false;
+    if (central_gradient && !volume.central_gradient(x, g)) return false;
     if (confidence_scale > S(0)) q *= (W * confidence_scale < S(1) ? W * confidence_scale : S(1));
     const Vec3<S> xg = cross(x, g);
     J = Vec6<S>{{g.x(), g.y(), g.z(), xg.x(), xg.y(), xg.z()}};
@@ -82,6 +88,7 @@ SdfAlignmentTerms<S, Store> make_sdf_alignment(const TsdfVolume<S, B, Store>& vo
   if (params.use_association && association) t.association = association->view();
   t.confidence_scale = params.use_map_confidence ? S(1) / params.confidence_normalizer : S(0);
   t.stride = params.pixel_stride;
+  t.central_gradient = params.central_gradient;
   return t;
 }
 
