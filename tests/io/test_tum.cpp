@@ -17,57 +17,23 @@
 #include "emfusion/io/frame_source.hpp"
 #include "emfusion/io/tum.hpp"
 #include "support/catch.hpp"
+#include "support/files.hpp"
 
 using namespace emfusion;
 namespace fs = std::filesystem;
+using emfusion::test::ScratchDir;
+using emfusion::test::contains;
+using emfusion::test::error_of;
+using emfusion::test::read_bytes;
+using emfusion::test::write_bytes;
+
 using emfusion::test::Approx;
 
 static_assert(FrameSource<TumSequence>);
 
 namespace {
 
-/// A fresh directory for one test, removed with everything in it afterwards.
-class ScratchDir {
- public:
-  ScratchDir() {
-    static int counter = 0;
-    path_ = fs::temp_directory_path() /
-            ("emfusion-tum-test-" + std::to_string(::getpid()) + "-" + std::to_string(counter++));
-    fs::remove_all(path_);
-    fs::create_directories(path_);
-  }
-  ~ScratchDir() {
-    std::error_code ignored;
-    fs::remove_all(path_, ignored);
-  }
-  ScratchDir(const ScratchDir&) = delete;
-  ScratchDir& operator=(const ScratchDir&) = delete;
-  std::string path() const { return path_.string(); }
-  std::string file(const std::string& name) const { return (path_ / name).string(); }
-  /// Writes `text` to `name` (creating parent folders) and returns its path.
-  std::string write(const std::string& name, const std::string& text) const {
-    const fs::path p = path_ / name;
-    fs::create_directories(p.parent_path());
-    std::ofstream(p, std::ios::binary) << text;
-    return p.string();
-  }
 
- private:
-  fs::path path_;
-};
-
-/// The message of the exception `f` throws, or "" if it throws none.
-template <class F>
-std::string error_of(F f) {
-  try {
-    f();
-  } catch (const std::exception& e) {
-    return e.what();
-  }
-  return "";
-}
-
-bool contains(const std::string& text, const std::string& part) { return text.find(part) != std::string::npos; }
 
 double max_abs_difference(const SE3<double>& a, const SE3<double>& b) {
   double d = 0;
