@@ -30,6 +30,7 @@
 #include <vector>
 
 #include "emfusion/core/math.hpp"
+#include "emfusion/io/detail/files.hpp"
 #include "emfusion/volume/mesh.hpp"
 
 namespace emfusion {
@@ -41,17 +42,10 @@ enum class PlyFormat {
 
 namespace detail::ply {
 
-struct FileCloser {
-  void operator()(std::FILE* f) const { std::fclose(f); }
-};
-using File = std::unique_ptr<std::FILE, FileCloser>;
-
-inline std::string quoted(const std::string& path) { return "'" + path + "'"; }
-inline std::string errno_text(int error) { return std::generic_category().message(error); }
-
-[[noreturn]] inline void fail(const char* where, const std::string& path, const std::string& problem) {
-  throw std::runtime_error(std::string(where) + ": " + quoted(path) + ": " + problem);
-}
+using io::errno_text;
+using io::fail;
+using io::File;
+using io::quoted;
 
 // ---- writing -----------------------------------------------------------------
 
@@ -306,18 +300,6 @@ class BodyReader {
   std::size_t item_ = 0, count_ = 0;
 };
 
-inline std::string read_file(const std::string& path) {
-  errno = 0;
-  File file(std::fopen(path.c_str(), "rb"));
-  if (!file) fail("read_ply", path, "cannot open for reading: " + errno_text(errno));
-  std::string data;
-  char buffer[1 << 16];
-  std::size_t n;
-  while ((n = std::fread(buffer, 1, sizeof(buffer), file.get())) > 0) data.append(buffer, n);
-  if (std::ferror(file.get())) fail("read_ply", path, "read error: " + errno_text(errno));
-  return data;
-}
-
 }  // namespace detail::ply
 
 /// Writes `mesh` to `path` (see the top of this header for the layout).
@@ -340,11 +322,7 @@ void write_ply(const std::string& path, const TriangleMesh<S>& mesh, PlyFormat f
                                     " refers to vertex " + std::to_string(v) + ", out of range for " +
                                     std::to_string(vertex_count) + " vertices");
 
-  const std::string temporary = path + ".tmp";
-  errno = 0;
-  ply::File file(std::fopen(temporary.c_str(), "wb"));
-  if (!file)
-    ply::fail("write_ply", path, "cannot open " + ply::quoted(temporary) + " for writing: " + ply::errno_text(errno));
+  detail::io::AtomicFile file("write_ply", path);
 
   const bool binary = format == PlyFormat::binary;
   std::string chunk =
@@ -389,21 +367,7 @@ void write_ply(const std::string& path, const TriangleMesh<S>& mesh, PlyFormat f
     if (chunk.size() >= chunk_bytes) error = ply::flush_to(file.get(), chunk);
   }
   if (error == 0) error = ply::flush_to(file.get(), chunk);
-  // Buffered data can still fail to reach the disk (full disk, quota) when
-  // the file is flushed and closed.
-  errno = 0;
-  if (error == 0 && std::fflush(file.get()) != 0) error = errno != 0 ? errno : EIO;
-  errno = 0;
-  if (std::fclose(file.release()) != 0 && error == 0) error = errno != 0 ? errno : EIO;
-  if (error != 0) {
-    std::remove(temporary.c_str());
-    ply::fail("write_ply", path, "cannot write " + ply::quoted(temporary) + ": " + ply::errno_text(error));
-  }
-  if (std::rename(temporary.c_str(), path.c_str()) != 0) {
-    const int error = errno;
-    std::remove(temporary.c_str());
-    ply::fail("write_ply", path, "cannot rename " + ply::quoted(temporary) + " to it: " + ply::errno_text(error));
-  }
+  file.commit(error == 0 ? "" : ply::errno_text(error));
 }
 
 /// Reads a triangle mesh from a PLY file: the "vertex" element's x, y, z
@@ -413,7 +377,7 @@ template <class S = float>
 TriangleMesh<S> read_ply(const std::string& path) {
   namespace ply = detail::ply;
   constexpr const char* where = "read_ply";
-  const std::string data = ply::read_file(path);
+  const std::string data = detail::io::read_file(path, "read_ply");
   const ply::Header header = ply::parse_header(data, path);
 
   const ply::Element* vertex_element = nullptr;

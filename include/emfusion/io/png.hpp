@@ -30,6 +30,7 @@
 #include <memory>
 #include <stdexcept>
 #include <string>
+#include <string_view>
 #include <system_error>
 #include <type_traits>
 #include <vector>
@@ -38,22 +39,16 @@
 
 #include "emfusion/core/backend.hpp"
 #include "emfusion/core/image.hpp"
+#include "emfusion/io/detail/files.hpp"
 
 namespace emfusion {
 
 namespace detail::png {
 
-inline std::string quoted(const std::string& path) { return "'" + path + "'"; }
-inline std::string errno_text(int error) { return std::generic_category().message(error); }
-
-[[noreturn]] inline void fail(const char* where, const std::string& path, const std::string& problem) {
-  throw std::runtime_error(std::string(where) + ": " + quoted(path) + ": " + problem);
-}
-
-struct FileCloser {
-  void operator()(std::FILE* f) const { std::fclose(f); }
-};
-using File = std::unique_ptr<std::FILE, FileCloser>;
+using io::errno_text;
+using io::fail;
+using io::File;
+using io::quoted;
 
 /// What the libpng callbacks share with the reader: the file's bytes and
 /// room for libpng's error message. Trivially destructible on purpose.
@@ -151,18 +146,6 @@ struct WriteStructs {
   }
 };
 
-inline std::vector<unsigned char> read_file(const std::string& path, const char* where) {
-  errno = 0;
-  File file(std::fopen(path.c_str(), "rb"));
-  if (!file) fail(where, path, "cannot open for reading: " + errno_text(errno));
-  std::vector<unsigned char> data;
-  unsigned char buffer[1 << 16];
-  std::size_t n;
-  while ((n = std::fread(buffer, 1, sizeof(buffer), file.get())) > 0) data.insert(data.end(), buffer, buffer + n);
-  if (std::ferror(file.get())) fail(where, path, "read error: " + errno_text(errno));
-  return data;
-}
-
 inline std::string color_type_name(int color_type) {
   switch (color_type) {
     case PNG_COLOR_TYPE_GRAY:
@@ -188,12 +171,14 @@ Image<T, Host> read_gray(const std::string& path, bool allow_narrower) {
   constexpr const char* where = "read_png";
   constexpr int target_bits = 8 * int(sizeof(T));
 
-  const std::vector<unsigned char> bytes = read_file(path, where);
-  if (bytes.size() < 8 || png_sig_cmp(bytes.data(), 0, 8) != 0)
+  const std::string file = io::read_file(path, where);
+  const auto* bytes_data = reinterpret_cast<const unsigned char*>(file.data());
+  const std::string_view bytes = file;
+  if (bytes.size() < 8 || png_sig_cmp(bytes_data, 0, 8) != 0)
     fail(where, path, bytes.empty() ? "not a PNG file (the file is empty)" : "not a PNG file (bad signature)");
 
   Context context;
-  context.data = bytes.data();
+  context.data = bytes_data;
   context.size = bytes.size();
   ReadStructs s;
   s.png = png_create_read_struct(PNG_LIBPNG_VER_STRING, &context, on_error, on_warning);
@@ -260,40 +245,17 @@ void write_gray(const std::string& path, const Image<T, Host>& image) {
     rows[std::size_t(y)] =
         reinterpret_cast<png_bytep>(const_cast<T*>(view.data + std::size_t(y) * std::size_t(view.width)));
 
-  const std::string temporary = path + ".tmp";
   Context context;
   WriteStructs s;
   s.png = png_create_write_struct(PNG_LIBPNG_VER_STRING, &context, on_error, on_warning);
   if (s.png) s.info = png_create_info_struct(s.png);
   if (!s.png || !s.info) fail(where, path, "cannot initialise libpng (out of memory or a libpng version mismatch)");
 
+  io::AtomicFile file(where, path);
   errno = 0;
-  File file(std::fopen(temporary.c_str(), "wb"));
-  if (!file) fail(where, path, "cannot open " + quoted(temporary) + " for writing: " + errno_text(errno));
-  errno = 0;
-  bool ok = write_rows(s.png, s.info, file.get(), png_uint_32(view.width), png_uint_32(view.height), 8 * int(sizeof(T)),
-                       rows.data());
-  std::string problem = ok ? "" : std::string(context.message) + (errno != 0 ? " (" + errno_text(errno) + ")" : "");
-  // Buffered data can still fail to reach the disk when the file is closed.
-  errno = 0;
-  if (ok && std::fflush(file.get()) != 0) {
-    ok = false;
-    problem = errno_text(errno != 0 ? errno : EIO);
-  }
-  errno = 0;
-  if (std::fclose(file.release()) != 0 && ok) {
-    ok = false;
-    problem = errno_text(errno != 0 ? errno : EIO);
-  }
-  if (!ok) {
-    std::remove(temporary.c_str());
-    fail(where, path, "cannot write " + quoted(temporary) + ": " + problem);
-  }
-  if (std::rename(temporary.c_str(), path.c_str()) != 0) {
-    const int error = errno;
-    std::remove(temporary.c_str());
-    fail(where, path, "cannot rename " + quoted(temporary) + " to it: " + errno_text(error));
-  }
+  const bool ok = write_rows(s.png, s.info, file.get(), png_uint_32(view.width), png_uint_32(view.height),
+                             8 * int(sizeof(T)), rows.data());
+  file.commit(ok ? "" : std::string(context.message) + (errno != 0 ? " (" + errno_text(errno) + ")" : ""));
 }
 
 }  // namespace detail::png

@@ -35,20 +35,16 @@
 #include "emfusion/core/math.hpp"
 #include "emfusion/core/se3.hpp"
 #include "emfusion/core/timed_pose.hpp"
+#include "emfusion/io/detail/files.hpp"
 #include "emfusion/io/frame_source.hpp"
 #include "emfusion/io/png.hpp"
 
 namespace emfusion {
 
-
-
 namespace detail::tum {
 
-inline std::string quoted(const std::string& path) { return "'" + path + "'"; }
-
-[[noreturn]] inline void fail(const char* where, const std::string& path, const std::string& problem) {
-  throw std::runtime_error(std::string(where) + ": " + quoted(path) + ": " + problem);
-}
+using io::fail;
+using io::quoted;
 [[noreturn]] inline void fail_at(const char* where, const std::string& path, int line, const std::string& problem) {
   throw std::runtime_error(std::string(where) + ": " + quoted(path) + " line " + std::to_string(line) + ": " + problem);
 }
@@ -70,20 +66,7 @@ inline bool is_file(const std::string& path) {
   return std::filesystem::is_regular_file(path, ignored);
 }
 
-inline std::string read_text(const std::string& path, const char* where) {
-  struct Closer {
-    void operator()(std::FILE* f) const { std::fclose(f); }
-  };
-  errno = 0;
-  std::unique_ptr<std::FILE, Closer> file(std::fopen(path.c_str(), "rb"));
-  if (!file) fail(where, path, "cannot open for reading: " + std::generic_category().message(errno));
-  std::string text;
-  char buffer[1 << 16];
-  std::size_t n;
-  while ((n = std::fread(buffer, 1, sizeof(buffer), file.get())) > 0) text.append(buffer, n);
-  if (std::ferror(file.get())) fail(where, path, "read error: " + std::generic_category().message(errno));
-  return text;
-}
+using io::read_file;
 
 /// A line that holds data: its number (from 1) and its fields.
 struct Line {
@@ -164,7 +147,7 @@ class LineParser {
 };
 
 inline std::vector<TimedPose> read_trajectory(const std::string& path, const char* where) {
-  const std::vector<Line> lines = data_lines(read_text(path, where));
+  const std::vector<Line> lines = data_lines(read_file(path, where));
   std::vector<TimedPose> poses;
   poses.reserve(lines.size());
   int previous_line = 0;
@@ -193,30 +176,10 @@ inline void append_fixed(std::string& out, double value, int decimals) {
 }
 
 inline void write_text(const std::string& path, const std::string& text, const char* where) {
-  struct Closer {
-    void operator()(std::FILE* f) const { std::fclose(f); }
-  };
-  const auto error_text = [](int error) { return std::generic_category().message(error != 0 ? error : EIO); };
-  const std::string temporary = path + ".tmp";
+  io::AtomicFile file(where, path);
   errno = 0;
-  std::unique_ptr<std::FILE, Closer> file(std::fopen(temporary.c_str(), "wb"));
-  if (!file) fail(where, path, "cannot open " + quoted(temporary) + " for writing: " + error_text(errno));
-  int error = 0;
-  errno = 0;
-  if (std::fwrite(text.data(), 1, text.size(), file.get()) != text.size()) error = errno != 0 ? errno : EIO;
-  errno = 0;
-  if (error == 0 && std::fflush(file.get()) != 0) error = errno != 0 ? errno : EIO;
-  errno = 0;
-  if (std::fclose(file.release()) != 0 && error == 0) error = errno != 0 ? errno : EIO;
-  if (error != 0) {
-    std::remove(temporary.c_str());
-    fail(where, path, "cannot write " + quoted(temporary) + ": " + error_text(error));
-  }
-  if (std::rename(temporary.c_str(), path.c_str()) != 0) {
-    const int rename_error = errno;
-    std::remove(temporary.c_str());
-    fail(where, path, "cannot rename " + quoted(temporary) + " to it: " + error_text(rename_error));
-  }
+  const bool written = std::fwrite(text.data(), 1, text.size(), file.get()) == text.size();
+  file.commit(written ? "" : io::errno_text(errno));
 }
 
 /// One entry of rgb.txt, depth.txt or associations.txt.
@@ -230,7 +193,7 @@ struct ListEntry {
 /// increasing.
 inline std::vector<ListEntry> read_list(const std::string& path, const char* where) {
   std::vector<ListEntry> entries;
-  for (const Line& line : data_lines(read_text(path, where))) {
+  for (const Line& line : data_lines(read_file(path, where))) {
     const LineParser p(where, path, line);
     p.expect_fields(2, "timestamp path");
     const double t = p.number(0, "timestamp");
@@ -305,7 +268,7 @@ inline void write_tum_trajectory(const std::string& path, const std::vector<Time
 inline PinholeCamera<double> read_calibration(const std::string& path) {
   namespace tum = detail::tum;
   constexpr const char* where = "read_calibration";
-  const std::vector<tum::Line> lines = tum::data_lines(tum::read_text(path, where));
+  const std::vector<tum::Line> lines = tum::data_lines(tum::read_file(path, where));
   if (lines.empty()) tum::fail(where, path, "no calibration line (fx fy cx cy width height)");
   if (lines.size() > 1)
     tum::fail_at(where, path, lines[1].number,
@@ -436,7 +399,7 @@ inline TumSequence TumSequence::open(const std::string& dir, const TumOptions& o
 
   if (tum::is_file(associations)) {
     seq.has_colour_ = true;
-    for (const tum::Line& line : tum::data_lines(tum::read_text(associations, where))) {
+    for (const tum::Line& line : tum::data_lines(tum::read_file(associations, where))) {
       const tum::LineParser p(where, associations, line);
       p.expect_fields(4, "t_rgb rgb_path t_depth depth_path");
       Frame f;
