@@ -6,6 +6,11 @@
 // while the SDF is truncated, then one voxel, then half a voxel once |sdf|
 // falls below 0.8 truncation. A crossing is refined by regula falsi inside
 // its bracket, so the surface is found to a small fraction of a voxel.
+//
+// Object volumes pass their foreground counts: a crossing counts only where
+// the foreground probability exceeds `min_foreground` (paper sec. 3.5), so
+// that surfaces fused into an object's box but not belonging to it (the
+// table under a cup) are not drawn; the ray then marches on.
 #pragma once
 
 #include <cmath>
@@ -16,6 +21,7 @@
 #include "emfusion/core/image.hpp"
 #include "emfusion/core/parallel.hpp"
 #include "emfusion/core/se3.hpp"
+#include "emfusion/volume/foreground.hpp"
 #include "emfusion/volume/tsdf_volume.hpp"
 
 namespace emfusion {
@@ -24,6 +30,7 @@ template <class S>
 struct RaycastParams {
   S min_depth = S(0.1);  ///< metres along the optical axis
   S max_depth = S(20);
+  S min_foreground = S(0.5);  ///< with foreground counts: draw only where p_fg exceeds this
 };
 
 /// Images a raycast writes; reuse one across frames to avoid allocations.
@@ -77,6 +84,7 @@ struct RaycastPixel {
   ImageView<Vec3<S>> vertices;
   ImageView<Vec3<S>> normals;
   ImageView<std::uint8_t> hit;
+  ForegroundView<S, const float> foreground;  // empty: every crossing counts
 
   EMF_HD void miss(int i) const {
     const S nan = std::numeric_limits<S>::quiet_NaN();
@@ -112,10 +120,15 @@ struct RaycastPixel {
       }
       if (have_prev && f_prev > S(0) && f <= S(0)) {
         const S t_hit = refine(origin, dir, t_prev, f_prev, t, f);
-        write_hit(i, ray_cam, t_hit, origin + t_hit * dir);
-        return;
+        const Vec3<S> p_hit = origin + t_hit * dir;
+        if (foreground.empty() || foreground.probability(p_hit) > params.min_foreground) {
+          write_hit(i, ray_cam, t_hit, p_hit);
+          return;
+        }
       }
-      if (have_prev && f_prev < S(0) && f > S(0)) break;  // left a surface from behind
+      // Leaving a surface from behind ends the ray, unless that surface was
+      // skipped as background of an object volume.
+      if (have_prev && f_prev < S(0) && f > S(0) && foreground.empty()) break;
       have_prev = true;
       t_prev = t, f_prev = f;
       t += f >= trunc ? trunc : (f >= S(0.8) * trunc ? vs : S(0.5) * vs);
@@ -160,17 +173,25 @@ struct RaycastPixel {
 }  // namespace detail
 
 /// Renders `volume` into `camera` at `T_world_camera`; writes into `out`
-/// (allocated on the volume's backend as needed).
+/// (allocated on the volume's backend as needed). With `foreground` (an
+/// object's counts, same grid), only surfaces with p_fg > min_foreground.
 template <class S, Backend B, class Store>
 void raycast(const TsdfVolume<S, B, Store>& volume, const PinholeCamera<S>& camera, const SE3<S>& T_world_camera,
-             RaycastResult<S, B>& out, const RaycastParams<S>& params = {}) {
+             RaycastResult<S, B>& out, const RaycastParams<S>& params = {},
+             const ForegroundCounts<S, B>* foreground = nullptr) {
   camera.validate("raycast");
   detail::require(params.min_depth >= S(0) && params.max_depth > params.min_depth, "raycast",
                   "need 0 <= min_depth < max_depth");
   out.resize(camera.width, camera.height, volume.backend());
   detail::RaycastPixel<S, Store> f{volume.view(),       camera,          volume.pose().inverse() * T_world_camera,
                                    params,              out.depth.view(), out.vertices.view(),
-                                   out.normals.view(),  out.hit.view()};
+                                   out.normals.view(),  out.hit.view(),   {}};
+  if (foreground) {
+    detail::require(foreground->dims()[0] == volume.dims()[0] && foreground->dims()[1] == volume.dims()[1] &&
+                        foreground->dims()[2] == volume.dims()[2],
+                    "raycast", "foreground counts and volume differ in size");
+    f.foreground = foreground->view();
+  }
   for_each_index(volume.backend(), camera.width * camera.height, f);
 }
 

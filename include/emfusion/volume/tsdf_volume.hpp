@@ -13,6 +13,7 @@
 #include <cmath>
 #include <cstdint>
 #include <string>
+#include <type_traits>
 #include <vector>
 
 #include <thrust/copy.h>
@@ -35,6 +36,13 @@ struct TsdfView {
   int nx = 0, ny = 0, nz = 0;
   S voxel_size = S(0);
   S truncation = S(0);
+
+  /// A read-only view of the same volume (only for views of mutable voxels).
+  template <class U = Store>
+    requires(!std::is_const_v<U>)
+  EMF_HD operator TsdfView<S, const U>() const {
+    return {sdf, weight, nx, ny, nz, voxel_size, truncation};
+  }
 
   EMF_HD std::int64_t index(int x, int y, int z) const {
     return (std::int64_t(z) * ny + y) * nx + x;

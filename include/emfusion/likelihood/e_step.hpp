@@ -1,0 +1,127 @@
+// The E-step of EM-Fusion (paper eq. 5): per pixel, the association
+// likelihood of its measured point to each of any number of models,
+//   q_k(u) = p(u | k) / sum_k' p(u | k'),
+// with a uniform prior over models. Pixels without a measurement, or whose
+// point lies outside every model, get 0 for every model.
+//
+// One association image per model, in the order the models are given
+// (the system puts the background first). Models are of one type M
+// satisfying MeasurementLikelihood; each comes with the pose that maps camera
+// points into its volume frame.
+#pragma once
+
+#include <cstring>
+#include <span>
+#include <string>
+#include <type_traits>
+#include <vector>
+
+#include <thrust/copy.h>
+
+#include "emfusion/core/error.hpp"
+#include "emfusion/core/image.hpp"
+#include "emfusion/core/parallel.hpp"
+#include "emfusion/core/se3.hpp"
+#include "emfusion/likelihood/measurement_likelihood.hpp"
+
+namespace emfusion {
+
+/// The E-step's output: one association image per model. Reuse one object
+/// across frames: images and scratch buffers are kept while sizes stay.
+template <class S, Backend B = Host>
+class Associations {
+ public:
+  int model_count() const { return int(images_.size()); }
+  /// q_k(u) for model k.
+  const Image<S, B>& image(int k) const { return images_.at(std::size_t(k)); }
+  Image<S, B>& image(int k) { return images_.at(std::size_t(k)); }
+
+  /// Makes room for `models` images of width x height (contents undefined).
+  void resize(int models, int width, int height, const B& backend) {
+    if (int(images_.size()) > models) images_.resize(std::size_t(models));
+    for (Image<S, B>& img : images_)
+      if (!img.same_size(width, height)) img = Image<S, B>(width, height, S(0), backend);
+    while (int(images_.size()) < models) images_.emplace_back(width, height, S(0), backend);
+  }
+
+ private:
+  template <class S2, Backend B2, class M>
+  friend void e_step(const B2&, const Image<Vec3<S2>, B2>&, std::span<const M>, std::span<const SE3<S2>>,
+                     Associations<S2, B2>&);
+
+  std::vector<Image<S, B>> images_;
+  // Models, poses and output views as bytes on the backend, so that a kernel
+  // can read any number of them without a fixed capacity.
+  typename B::template Vector<unsigned char> scratch_;
+};
+
+namespace detail {
+
+template <class S, class M>
+struct EStepPixel {
+  ImageView<const Vec3<S>> points;
+  const M* models;
+  const SE3<S>* T_volume_camera;
+  ImageView<S>* out;
+  int model_count;
+
+  EMF_HD void operator()(int i) const {
+    const Vec3<S> p = points[i];
+    S total = S(0);
+    const bool valid = std::isfinite(p.x()) && std::isfinite(p.y()) && std::isfinite(p.z());
+    for (int k = 0; k < model_count; ++k) {
+      const S l = valid ? S(models[k].likelihood(T_volume_camera[k] * p)) : S(0);
+      out[k][i] = l;
+      total += l;
+    }
+    const S scale = total > S(0) ? S(1) / total : S(0);
+    for (int k = 0; k < model_count; ++k) out[k][i] *= scale;
+  }
+};
+
+/// Bytes needed to place `count` objects of T after `offset`, aligned.
+template <class T>
+std::size_t place(std::size_t& offset, std::size_t count) {
+  const std::size_t a = alignof(T) > 16 ? alignof(T) : 16;
+  offset = (offset + a - 1) / a * a;
+  const std::size_t at = offset;
+  offset += count * sizeof(T);
+  return at;
+}
+
+}  // namespace detail
+
+/// Computes the association images of `models` (poses T_volume_camera[k])
+/// for the camera-frame points (non-finite = no measurement).
+template <class S, Backend B, class M>
+void e_step(const B& backend, const Image<Vec3<S>, B>& points, std::span<const M> models,
+            std::span<const SE3<S>> T_volume_camera, Associations<S, B>& out) {
+  static_assert(MeasurementLikelihood<M, S>, "the model type must satisfy MeasurementLikelihood");
+  static_assert(std::is_trivially_copyable_v<M>, "likelihood models are copied to the backend as bytes");
+  detail::require(models.size() == T_volume_camera.size(), "e_step",
+                  std::to_string(models.size()) + " models but " + std::to_string(T_volume_camera.size()) + " poses");
+  detail::require(!points.empty(), "e_step", "the vertex map is empty");
+  const int n = int(models.size());
+  out.resize(n, points.width(), points.height(), backend);
+  if (n == 0) return;
+
+  std::vector<ImageView<S>> views;
+  for (int k = 0; k < n; ++k) views.push_back(out.image(k).view());
+  std::size_t size = 0;
+  const std::size_t at_models = detail::place<M>(size, models.size());
+  const std::size_t at_poses = detail::place<SE3<S>>(size, models.size());
+  const std::size_t at_views = detail::place<ImageView<S>>(size, views.size());
+  std::vector<unsigned char> bytes(size);
+  std::memcpy(bytes.data() + at_models, models.data(), models.size() * sizeof(M));
+  std::memcpy(bytes.data() + at_poses, T_volume_camera.data(), models.size() * sizeof(SE3<S>));
+  std::memcpy(bytes.data() + at_views, views.data(), views.size() * sizeof(ImageView<S>));
+  if (out.scratch_.size() < size) out.scratch_.resize(size);
+  thrust::copy(bytes.begin(), bytes.end(), out.scratch_.begin());
+  unsigned char* base = thrust::raw_pointer_cast(out.scratch_.data());
+  detail::EStepPixel<S, M> f{points.view(), reinterpret_cast<const M*>(base + at_models),
+                             reinterpret_cast<const SE3<S>*>(base + at_poses),
+                             reinterpret_cast<ImageView<S>*>(base + at_views), n};
+  for_each_index(backend, points.size(), f);
+}
+
+}  // namespace emfusion

@@ -1,0 +1,160 @@
+// One object of the EM-Fusion map: its TSDF and foreground counts, its pose,
+// existence counts and class scores, and resizing that keeps the voxel size
+// and the grid alignment (paper sec. 3.5).
+//
+// Frames: the object frame is fixed to the object (its origin is the centre
+// of the volume it was created with); the volume frame (corner of the grid)
+// sits at T_object_volume in it, which changes only when the volume grows.
+// Trajectories and meshes are written in the object frame.
+#pragma once
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "emfusion/core/parallel.hpp"
+#include "emfusion/core/se3.hpp"
+#include "emfusion/volume/foreground.hpp"
+#include "emfusion/volume/raycast.hpp"
+#include "emfusion/volume/tsdf_volume.hpp"
+
+namespace emfusion {
+
+namespace detail {
+/// Copies voxel i of the old grid to its place in the grown grid.
+template <class S>
+struct CopyIntoGrown {
+  TsdfView<S, const S> from;
+  TsdfView<S, S> to;
+  ForegroundView<S, const float> fg_from;
+  ForegroundView<S, float> fg_to;
+  Vec3i offset;
+
+  EMF_HD void operator()(std::int64_t i) const {
+    const int x = int(i % from.nx), y = int((i / from.nx) % from.ny), z = int(i / (std::int64_t(from.nx) * from.ny));
+    const std::int64_t j = to.index(x + offset[0], y + offset[1], z + offset[2]);
+    to.sdf[j] = from.sdf[i];
+    to.weight[j] = from.weight[i];
+    fg_to.fg[j] = fg_from.fg[i];
+    fg_to.bg[j] = fg_from.bg[i];
+  }
+};
+}  // namespace detail
+
+template <class S, Backend B = Host>
+class ObjectModel {
+ public:
+  /// A new object with a cubic volume of `voxels`^3 voxels of `voxel_size`
+  /// centred on the object frame's origin, which is at T_world_object.
+  ObjectModel(int id, std::string class_name, const SE3<S>& T_world_object, int voxels, S voxel_size,
+              S truncation_voxels, B backend = B{})
+      : id_(id), class_name_(std::move(class_name)), T_world_object_(T_world_object),
+        T_object_volume_(SE3<S>::translation(Vec3<S>::constant(-S(voxels) * voxel_size / S(2)))),
+        volume_(geometry(Vec3i{{voxels, voxels, voxels}}, voxel_size, truncation_voxels), backend),
+        foreground_(Vec3i{{voxels, voxels, voxels}}, voxel_size, backend) {
+    sync_volume_pose();
+  }
+
+  int id() const { return id_; }
+  /// The class with the highest accumulated score.
+  const std::string& class_name() const { return class_name_; }
+
+  const SE3<S>& pose() const { return T_world_object_; }  ///< T_world_object
+  void set_pose(const SE3<S>& T_world_object) {
+    T_world_object_ = T_world_object;
+    sync_volume_pose();
+  }
+  const SE3<S>& T_object_volume() const { return T_object_volume_; }
+
+  TsdfVolume<S, B>& volume() { return volume_; }
+  const TsdfVolume<S, B>& volume() const { return volume_; }
+  ForegroundCounts<S, B>& foreground() { return foreground_; }
+  const ForegroundCounts<S, B>& foreground() const { return foreground_; }
+  /// The last raycast of this object (the system's segmentation uses it).
+  RaycastResult<S, B>& rendering() { return rendering_; }
+  const RaycastResult<S, B>& rendering() const { return rendering_; }
+
+  // Existence (counted on detector frames).
+  void count_detected() { ++existence_; }
+  void count_missed() { ++non_existence_; }
+  int existence_count() const { return existence_; }
+  int non_existence_count() const { return non_existence_; }
+  double existence_probability() const { return double(existence_) / double(existence_ + non_existence_); }
+
+  /// Adds a detection's score to its class; the object's class is the
+  /// class with the highest sum.
+  void add_class_score(const std::string& name, double score) {
+    auto it = std::find_if(class_scores_.begin(), class_scores_.end(), [&](auto& c) { return c.first == name; });
+    if (it == class_scores_.end()) {
+      class_scores_.emplace_back(name, 0.0);
+      it = class_scores_.end() - 1;
+    }
+    it->second += score;
+    const auto best = std::max_element(class_scores_.begin(), class_scores_.end(),
+                                       [](auto& a, auto& b) { return a.second < b.second; });
+    class_name_ = best->first;
+  }
+  const std::vector<std::pair<std::string, double>>& class_scores() const { return class_scores_; }
+
+  /// Grows the volume so that the volume-frame box [lo, hi] fits, adding
+  /// whole voxels on the sides that need them (the voxel size and the
+  /// positions of existing voxels in the object frame stay), at most
+  /// `max_voxels` per axis. Returns true if the volume changed.
+  bool grow_to_fit(const Vec3<S>& lo, const Vec3<S>& hi, int max_voxels) {
+    const Vec3i old_dims = volume_.dims();
+    const S s = volume_.voxel_size();
+    Vec3i below{{0, 0, 0}}, dims = old_dims;
+    for (int a = 0; a < 3; ++a) {
+      int add_lo = std::max(0, int(std::ceil(-lo[a] / s)));
+      int add_hi = std::max(0, int(std::ceil((hi[a] - S(old_dims[a]) * s) / s)));
+      // Within the cap, keep what can be kept: split the room between both sides.
+      const int room = std::max(0, max_voxels - old_dims[a]);
+      if (add_lo + add_hi > room) {
+        const int total = add_lo + add_hi;
+        add_lo = int(std::floor(double(add_lo) * room / total));
+        add_hi = room - add_lo;
+      }
+      below[a] = add_lo;
+      dims[a] = old_dims[a] + add_lo + add_hi;
+    }
+    if (dims[0] == old_dims[0] && dims[1] == old_dims[1] && dims[2] == old_dims[2]) return false;
+    const B backend = volume_.backend();
+    TsdfVolume<S, B> volume(geometry(dims, s, volume_.truncation() / s), backend);
+    ForegroundCounts<S, B> counts(dims, s, backend);
+    detail::CopyIntoGrown<S> f{std::as_const(volume_).view(), volume.view(), std::as_const(foreground_).view(),
+                                counts.view(), below};
+    for_each_index(backend, volume_.voxel_count(), f);
+    volume_ = std::move(volume);
+    foreground_ = std::move(counts);
+    T_object_volume_ = T_object_volume_ * SE3<S>::translation(-s * vec3(S(below[0]), S(below[1]), S(below[2])));
+    sync_volume_pose();
+    return true;
+  }
+
+  std::size_t memory_bytes() const { return volume_.memory_bytes() + foreground_.memory_bytes(); }
+
+ private:
+  static VolumeGeometry<S> geometry(const Vec3i& dims, S voxel_size, S truncation_voxels) {
+    VolumeGeometry<S> g;
+    g.dims = dims;
+    g.voxel_size = voxel_size;
+    g.truncation = truncation_voxels * voxel_size;
+    return g;
+  }
+  void sync_volume_pose() { volume_.set_pose(T_world_object_ * T_object_volume_); }
+
+  int id_;
+  std::string class_name_;
+  std::vector<std::pair<std::string, double>> class_scores_;
+  SE3<S> T_world_object_;
+  SE3<S> T_object_volume_;
+  TsdfVolume<S, B> volume_;
+  ForegroundCounts<S, B> foreground_;
+  RaycastResult<S, B> rendering_;
+  int existence_ = 1;  // the detection that created it
+  int non_existence_ = 0;
+};
+}  // namespace emfusion

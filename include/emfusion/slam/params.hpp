@@ -1,0 +1,94 @@
+// Every parameter of the EM-Fusion system in one struct, with the paper's
+// and the reference implementation's values as defaults
+// (shared/PARAMETERS.md; docs/parameters.md explains each one).
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include "emfusion/core/error.hpp"
+#include "emfusion/detect/proposal.hpp"
+#include "emfusion/likelihood/measurement_likelihood.hpp"
+#include "emfusion/preprocess/bilateral_filter.hpp"
+#include "emfusion/solve/solvers.hpp"
+#include "emfusion/volume/integrate.hpp"
+
+namespace emfusion {
+
+template <class S>
+struct SystemParams {
+  // Preprocessing.
+  BilateralParams<S> bilateral{};
+
+  // Background volume: a cube of background_voxels^3, camera at the centre
+  // of one face in the first frame.
+  int background_voxels = 512;
+  S background_voxel_size = S(0.01);
+  S truncation_voxels = S(10);  ///< truncation of every volume, in its voxels
+
+  // Objects.
+  int object_voxels = 64;        ///< initial resolution of a new object
+  S object_padding = S(2);       ///< volume side / largest extent of the 10-90 % box
+  int max_object_voxels = 256;   ///< resizing stops growing a volume beyond this per axis
+  int max_objects = 16;          ///< live objects; detections beyond it create none (bounds memory)
+
+  // Tracking (eq. 8/9).
+  S huber_voxels = S(2);         ///< Huber delta in voxels of the tracked volume
+  LevenbergMarquardtParams lm{};
+  int pixel_stride = 1;          ///< use every n-th pixel in x and y when tracking
+  /// An object whose alignment has fewer terms keeps its previous pose.
+  int min_object_terms = 100;
+
+  // Association (eq. 5/7).
+  LikelihoodParams<S> likelihood{};
+
+  // Mapping (eq. 10): the paper's update for both; see IntegrationParams.
+  IntegrationParams<S> background_integration{};
+  IntegrationParams<S> object_integration{};
+
+  // Detections (sec. 3.5).
+  double match_iou = 0.2;             ///< a detection matches an object above this mask IoU
+  int min_mask_pixels = 1600;         ///< 40 x 40: smaller detections create nothing
+  S max_object_distance = S(5);       ///< metres from the camera to a new object's centre
+  double max_volume_iou = 0.5;        ///< a new volume must overlap every other less
+  double max_covered_fraction = 0.5;  ///< drop a mask when existing objects cover this much of it
+  double min_existence = 0.1;         ///< delete when Ex / (Ex + NonEx) falls below
+  int visibility_border = 20;         ///< pixels; mask pixels nearer the image edge do not count
+  double min_association = 0.1;       ///< delete when the mean association over the mask falls below
+  std::vector<std::string> static_classes = default_static_classes();
+  bool ignore_person = false;         ///< keep person objects for association only
+
+  // Rendering (sec. 3.5).
+  S min_foreground = S(0.5);     ///< object voxels render where p_fg exceeds this
+  S occlusion_margin = S(0.05);  ///< an object pixel this far behind the background loses
+
+  // Ablations (paper Table 3).
+  bool use_association = true;     ///< false: q(u) = 1 for tracking and mapping of every model
+  bool use_map_confidence = true;  ///< false: no W / W_max weights in tracking
+
+  /// Throws std::invalid_argument naming the first bad value.
+  void validate() const {
+    const char* w = "SystemParams";
+    bilateral.validate("SystemParams.bilateral");
+    detail::require(background_voxels >= 8 && background_voxels <= 2048, w, "background_voxels must be in 8..2048");
+    detail::require(background_voxel_size > S(0), w, "background_voxel_size must be positive");
+    detail::require(truncation_voxels > S(1), w, "truncation_voxels must be greater than 1");
+    detail::require(object_voxels >= 8 && object_voxels <= max_object_voxels, w,
+                    "object_voxels must be at least 8 and at most max_object_voxels");
+    detail::require(max_object_voxels <= 1024, w, "max_object_voxels must be at most 1024");
+    detail::require(object_padding >= S(1), w, "object_padding must be at least 1");
+    detail::require(max_objects >= 0 && max_objects <= 256, w, "max_objects must be in 0..256");
+    detail::require(huber_voxels > S(0), w, "huber_voxels must be positive");
+    detail::require(pixel_stride >= 1, w, "pixel_stride must be at least 1");
+    detail::require(likelihood.sigma > S(0) && likelihood.alpha >= S(0) && likelihood.alpha <= S(1) &&
+                        likelihood.p_uniform >= S(0),
+                    w, "likelihood needs sigma > 0, alpha in [0, 1], p_uniform >= 0");
+    detail::require(match_iou >= 0 && match_iou < 1, w, "match_iou must be in [0, 1)");
+    detail::require(min_mask_pixels >= 1, w, "min_mask_pixels must be at least 1");
+    detail::require(visibility_border >= 0, w, "visibility_border must not be negative");
+    detail::require(background_integration.max_weight > S(0) && object_integration.max_weight > S(0), w,
+                    "max_weight must be positive");
+  }
+};
+
+}  // namespace emfusion

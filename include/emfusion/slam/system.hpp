@@ -1,0 +1,592 @@
+// The EM-Fusion system: background and object TSDFs, the E-step, direct SDF
+// tracking of the camera and of every object, detection handling and
+// association-weighted mapping, per frame as in DESIGN.md section 1:
+//
+//   1. preprocess: bilateral filter, back-projection;
+//   2. E-step at the previous poses;
+//   3. track the camera against the background, re-associate, track every
+//      object; associate once more at the final poses (the mapping weights);
+//   4. raycast every model (objects only where p_fg > 0.5, nearest wins);
+//   5. on detector frames: match, existence, new objects, resizing;
+//   6. integrate the frame into every model, weighted by its association;
+//      update foreground counts from the matched detections;
+//   7. delete objects that are unlikely, invisible or weakly associated.
+//
+// Generic over the scalar and the backend; everything per pixel or voxel
+// runs on the backend, detection handling (every 30th frame) on the host.
+#pragma once
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdint>
+#include <memory>
+#include <optional>
+#include <span>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "emfusion/core/camera.hpp"
+#include "emfusion/core/image.hpp"
+#include "emfusion/core/parallel.hpp"
+#include "emfusion/core/se3.hpp"
+#include "emfusion/core/timed_pose.hpp"
+#include "emfusion/detect/detection.hpp"
+#include "emfusion/detect/matching.hpp"
+#include "emfusion/detect/proposal.hpp"
+#include "emfusion/likelihood/e_step.hpp"
+#include "emfusion/likelihood/measurement_likelihood.hpp"
+#include "emfusion/preprocess/bilateral_filter.hpp"
+#include "emfusion/preprocess/vertex_map.hpp"
+#include "emfusion/robust/norms.hpp"
+#include "emfusion/slam/object_model.hpp"
+#include "emfusion/slam/params.hpp"
+#include "emfusion/solve/sdf_alignment.hpp"
+#include "emfusion/volume/foreground.hpp"
+#include "emfusion/volume/integrate.hpp"
+#include "emfusion/volume/raycast.hpp"
+
+namespace emfusion {
+
+/// Milliseconds per stage of one frame (the stages of the header comment).
+struct StageTimes {
+  double preprocess = 0, e_step = 0, track_background = 0, track_objects = 0, raycast = 0, detections = 0,
+         integrate = 0, foreground = 0, total = 0;
+};
+
+/// Why an object left the map.
+enum class DeletionReason { none, existence, not_visible, weak_association };
+
+inline const char* to_string(DeletionReason r) {
+  switch (r) {
+    case DeletionReason::none: return "none";
+    case DeletionReason::existence: return "existence";
+    case DeletionReason::not_visible: return "not_visible";
+    case DeletionReason::weak_association: return "weak_association";
+  }
+  return "unknown";
+}
+
+/// Everything known about an object ever created, kept after deletion.
+struct ObjectRecord {
+  int id = 0;
+  std::string class_name;
+  double first_timestamp = 0, last_timestamp = 0;
+  bool deleted = false;
+  DeletionReason reason = DeletionReason::none;
+  bool person = false;     ///< class person with ignore_person: not rendered or exported
+  Trajectory trajectory;   ///< T_world_object per frame it existed
+};
+
+/// What happened in one frame.
+struct FrameResult {
+  int frame = 0;
+  double timestamp = 0;
+  SolveReport camera;                   ///< background tracking (empty on the first frame)
+  std::vector<SolveReport> objects;     ///< per live object tracked, in objects() order before changes
+  bool detector_frame = false;
+  int detections = 0, matched = 0;
+  std::vector<int> created, deleted;    ///< object ids
+  int live_objects = 0;
+  StageTimes times;
+};
+
+template <class S, Backend B = Host>
+class System {
+ public:
+  using Object = ObjectModel<S, B>;
+  using Model = PaperLikelihood<S>;
+
+  System(const PinholeCamera<S>& camera, const SystemParams<S>& params = {}, B backend = B{})
+      : camera_(camera), params_(params), backend_(backend), background_(background_geometry(params), backend) {
+    camera_.validate("System");
+    params_.validate();
+  }
+
+  /// Processes one depth frame (metres, 0 = invalid, camera size) with the
+  /// detector's result for it, if the detector ran.
+  FrameResult process(const Image<S, B>& depth, double timestamp, const Detections* detections = nullptr) {
+    detail::require_image(depth.view(), camera_.width, camera_.height, "System::process", "depth image");
+    FrameResult result;
+    result.frame = frame_;
+    result.timestamp = timestamp;
+    Clock clock(backend_);
+
+    bilateral_filter(depth, filtered_, params_.bilateral);
+    back_project(filtered_, camera_, points_);
+    result.times.preprocess = clock.lap();
+
+    if (frame_ > 0) track(result, clock);
+    render_models();
+    result.times.raycast = clock.lap();
+
+    // Mapping weights of new objects: their detection masks.
+    std::vector<NewObjectWeights> fresh;
+    std::vector<int> matched_object_of_detection;
+    if (detections) handle_detections(*detections, result, fresh, matched_object_of_detection);
+    result.times.detections = clock.lap();
+
+    integrate_models(depth, fresh);
+    result.times.integrate = clock.lap();
+    if (detections) update_foreground_counts(depth, *detections, matched_object_of_detection, fresh);
+    result.times.foreground = clock.lap();
+
+    delete_objects(result, detections != nullptr, int(fresh.size()));
+    record(timestamp);
+    result.live_objects = int(objects_.size());
+    result.times.total = clock.total();
+    ++frame_;
+    return result;
+  }
+
+  const PinholeCamera<S>& camera() const { return camera_; }
+  const SystemParams<S>& params() const { return params_; }
+  int frame_count() const { return frame_; }
+  const SE3<S>& camera_pose() const { return T_world_camera_; }  ///< T_world_camera of the last frame
+  const Trajectory& camera_trajectory() const { return camera_trajectory_; }
+  const TsdfVolume<S, B>& background() const { return background_; }
+  /// Live objects; association image k + 1 and segmentation label k + 1 are objects()[k].
+  const std::vector<std::unique_ptr<Object>>& objects() const { return objects_; }
+  /// Every object ever created, in creation order.
+  const std::vector<ObjectRecord>& object_records() const { return records_; }
+  /// The association images of the last frame: [0] background, [k + 1] objects()[k] (before deletions).
+  const Associations<S, B>& associations() const { return associations_; }
+  /// Per pixel: -1 nothing rendered, 0 background, k + 1 objects()[k] (rendered at the final poses).
+  const Image<int, B>& segmentation() const { return segmentation_; }
+  /// The preprocessed frame as camera-frame points.
+  const Image<Vec3<S>, B>& points() const { return points_; }
+
+ private:
+  struct Clock {
+    using clock = std::chrono::steady_clock;
+    explicit Clock(const B& b) : backend(b), start(clock::now()), last(start) {}
+    double lap() {
+      backend.synchronize();
+      const auto now = clock::now();
+      const double ms = std::chrono::duration<double, std::milli>(now - last).count();
+      last = now;
+      return ms;
+    }
+    double total() const { return std::chrono::duration<double, std::milli>(clock::now() - start).count(); }
+    const B& backend;
+    clock::time_point start, last;
+  };
+  struct NewObjectWeights {
+    Image<S, B> weights;              // 1 inside the usable mask, 0 elsewhere
+    Image<std::uint8_t, B> mask;      // the same as bytes, for the foreground counts
+    int detection = -1;
+  };
+
+  static VolumeGeometry<S> background_geometry(const SystemParams<S>& p) {
+    p.validate();
+    VolumeGeometry<S> g;
+    g.dims = Vec3i{{p.background_voxels, p.background_voxels, p.background_voxels}};
+    g.voxel_size = p.background_voxel_size;
+    g.truncation = p.truncation_voxels * p.background_voxel_size;
+    g.T_world_volume = volume_pose_in_front_of(SE3<S>::identity(), S(p.background_voxels) * p.background_voxel_size);
+    return g;
+  }
+
+  // ---- E-step ------------------------------------------------------------
+
+  Model model_of(const TsdfVolume<S, B>& volume, const ForegroundCounts<S, B>* fg) const {
+    Model m;
+    m.volume = volume.view();
+    if (fg) m.foreground = fg->view();
+    m.params = params_.likelihood;
+    return m;
+  }
+
+  /// Association images for the camera at T_world_camera_ and the objects at
+  /// their current poses.
+  void associate() {
+    if (!params_.use_association) return foreground_weights();
+    std::vector<Model> models;
+    std::vector<SE3<S>> poses;
+    models.push_back(model_of(background_, nullptr));
+    poses.push_back(background_.pose().inverse() * T_world_camera_);
+    for (const auto& o : objects_) {
+      models.push_back(model_of(o->volume(), &o->foreground()));
+      poses.push_back(o->volume().pose().inverse() * T_world_camera_);
+    }
+    e_step(backend_, points_, std::span<const Model>(models), std::span<const SE3<S>>(poses), associations_);
+  }
+
+  /// The ablation without association likelihoods (paper Table 3, Fig. 3):
+  /// objects weight a pixel by the foreground probability of its point,
+  /// the background takes every pixel with weight 1.
+  void foreground_weights() {
+    associations_.resize(int(objects_.size()) + 1, camera_.width, camera_.height, backend_);
+    associations_.image(0).fill(S(1));
+    for (std::size_t k = 0; k < objects_.size(); ++k) {
+      const Object& o = *objects_[k];
+      for_each_index(backend_, points_.size(),
+                     ForegroundWeight{std::as_const(points_).view(), o.volume().view(), o.foreground().view(),
+                                      o.volume().pose().inverse() * T_world_camera_,
+                                      associations_.image(int(k) + 1).view()});
+    }
+  }
+  struct ForegroundWeight {
+    ImageView<const Vec3<S>> points;
+    TsdfView<S, const S> volume;
+    ForegroundView<S, const float> foreground;
+    SE3<S> T_volume_camera;
+    ImageView<S> out;
+    EMF_HD void operator()(int i) const {
+      const Vec3<S> p = points[i];
+      out[i] = S(0);
+      if (!is_valid(p)) return;
+      const Vec3<S> x = T_volume_camera * p, e = volume.extent();
+      if (x.x() >= S(0) && x.y() >= S(0) && x.z() >= S(0) && x.x() < e.x() && x.y() < e.y() && x.z() < e.z())
+        out[i] = foreground.probability(x);
+    }
+  };
+
+  const Image<S, B>* association_weights(int model) const { return &associations_.image(model); }
+
+  // ---- Tracking ----------------------------------------------------------
+
+  SdfAlignmentParams<S> alignment_params() const {
+    SdfAlignmentParams<S> a;
+    a.use_association = true;  // the weights are p_fg in the ablation without association
+    a.use_map_confidence = params_.use_map_confidence;
+    a.confidence_normalizer = params_.background_integration.max_weight;
+    a.pixel_stride = params_.pixel_stride;
+    return a;
+  }
+
+  void track(FrameResult& result, Clock& clock) {
+    const SdfAlignmentParams<S> align = alignment_params();
+    double e_ms = 0;
+    associate();
+    e_ms += clock.lap();
+    const HuberNorm<S> bg_norm{params_.huber_voxels * background_.voxel_size()};
+    T_world_camera_ = align_to_volume(background_, points_, association_weights(0), T_world_camera_, bg_norm, align,
+                                      params_.lm, &result.camera);
+    result.times.track_background = clock.lap();
+    if (!objects_.empty()) {
+      associate();
+      e_ms += clock.lap();
+      SdfAlignmentParams<S> obj_align = align;
+      obj_align.confidence_normalizer = params_.object_integration.max_weight;
+      for (std::size_t k = 0; k < objects_.size(); ++k) {
+        Object& o = *objects_[k];
+        const HuberNorm<S> norm{params_.huber_voxels * o.volume().voxel_size()};
+        SolveReport report;
+        // The object starts where it was; the solver finds how it moved
+        // relative to the camera.
+        const SE3<S> T_world_volume = o.volume().pose();
+        const SE3<S> moved = align_to_volume(o.volume(), points_, association_weights(int(k) + 1), T_world_camera_,
+                                             norm, obj_align, params_.lm, &report);
+        if (report.converged() && report.terms >= params_.min_object_terms) {
+          const SE3<S> T_volume_camera = T_world_volume.inverse() * moved;
+          o.set_pose(T_world_camera_ * T_volume_camera.inverse() * o.T_object_volume().inverse());
+        }
+        result.objects.push_back(report);
+      }
+      result.times.track_objects = clock.lap();
+    }
+    associate();
+    e_ms += clock.lap();
+    result.times.e_step = e_ms;
+  }
+
+  // ---- Rendering ---------------------------------------------------------
+
+  void render_models() {
+    RaycastParams<S> rp;
+    rp.min_foreground = params_.min_foreground;
+    const int w = camera_.width, h = camera_.height;
+    if (!segmentation_.same_size(w, h)) {
+      segmentation_ = Image<int, B>(w, h, -1, backend_);
+      object_depth_ = Image<S, B>(w, h, S(0), backend_);
+    }
+    if (!objects_.empty()) raycast(background_, camera_, T_world_camera_, background_render_, rp);
+    // Nearest object per pixel first, then the background rule.
+    object_depth_.fill(S(0));
+    segmentation_.fill(-1);
+    for (std::size_t k = 0; k < objects_.size(); ++k) {
+      Object& o = *objects_[k];
+      if (is_person(o)) continue;
+      raycast(o.volume(), camera_, T_world_camera_, o.rendering(), rp, &o.foreground());
+      for_each_index(backend_, w * h,
+                     NearestObject{std::as_const(o).rendering().depth.view(), object_depth_.view(),
+                                   segmentation_.view(), int(k) + 1});
+    }
+    const ImageView<const S> bg =
+        objects_.empty() ? ImageView<const S>{} : std::as_const(background_render_).depth.view();
+    for_each_index(backend_, w * h,
+                   ResolveBackground{bg, std::as_const(object_depth_).view(), segmentation_.view(),
+                                     params_.occlusion_margin, points_.view()});
+  }
+
+  struct NearestObject {
+    ImageView<const S> depth;
+    ImageView<S> best_depth;
+    ImageView<int> label;
+    int model;
+    EMF_HD void operator()(int i) const {
+      const S d = depth[i];
+      if (!(d > S(0))) return;
+      if (best_depth[i] > S(0) && !(d < best_depth[i])) return;
+      best_depth[i] = d;
+      label[i] = model;
+    }
+  };
+  struct ResolveBackground {
+    ImageView<const S> background;  // empty when there are no objects
+    ImageView<const S> object_depth;
+    ImageView<int> label;
+    S margin;
+    ImageView<const Vec3<S>> points;
+    EMF_HD void operator()(int i) const {
+      const S bg = background.empty() ? S(0) : background[i];
+      const bool has_bg = background.empty() ? is_valid(points[i]) : bg > S(0);
+      if (label[i] > 0 && (!(bg > S(0)) || object_depth[i] <= bg + margin)) return;
+      label[i] = has_bg ? 0 : -1;
+    }
+  };
+
+  bool is_person(const Object& o) const { return params_.ignore_person && o.class_name() == "person"; }
+
+  // ---- Detections --------------------------------------------------------
+
+  void handle_detections(const Detections& det, FrameResult& result, std::vector<NewObjectWeights>& fresh,
+                         std::vector<int>& object_of_detection) {
+    detail::require(det.labels.width() == camera_.width && det.labels.height() == camera_.height, "System::process",
+                    "detection label image is " + std::to_string(det.labels.width()) + "x" +
+                        std::to_string(det.labels.height()) + " but the camera is " + std::to_string(camera_.width) +
+                        "x" + std::to_string(camera_.height));
+    result.detector_frame = true;
+    result.detections = int(det.instances.size());
+    const std::vector<int> seg = segmentation_.to_host();
+    const DetectionMatch match =
+        match_detections(mask_iou(det, seg, int(objects_.size())), params_.match_iou);
+    object_of_detection = match.object_of;
+
+    std::vector<bool> seen(objects_.size(), false);
+    const std::vector<Vec3<S>> points = points_.to_host();
+    const std::uint16_t* labels = det.labels.view().data;
+    for (std::size_t d = 0; d < det.instances.size(); ++d) {
+      const Instance& inst = det.instances[d];
+      const int o = match.object_of[d];
+      if (o < 0) continue;
+      ++result.matched;
+      seen[std::size_t(o)] = true;
+      Object& obj = *objects_[std::size_t(o)];
+      obj.add_class_score(inst.class_name, inst.score);
+      grow_for_detection(obj, points, labels, inst.label);
+    }
+    for (std::size_t o = 0; o < objects_.size(); ++o) {
+      if (seen[o])
+        objects_[o]->count_detected();
+      else
+        objects_[o]->count_missed();
+    }
+    for (std::size_t d = 0; d < det.instances.size(); ++d) {
+      if (match.object_of[d] >= 0) continue;
+      if (std::optional<NewObjectWeights> w = create_object(det, int(d), seg, points, result)) fresh.push_back(std::move(*w));
+    }
+  }
+
+  /// Volume-frame points of a detection's pixels.
+  std::vector<Vec3<S>> detection_points(const std::vector<Vec3<S>>& points, const std::uint16_t* labels, int label,
+                                        const SE3<S>& T_frame_camera, const std::vector<int>* seg = nullptr,
+                                        int* covered = nullptr, int* total = nullptr) const {
+    std::vector<Vec3<S>> out;
+    for (std::size_t i = 0; i < points.size(); ++i) {
+      if (labels[i] != label) continue;
+      if (total) ++*total;
+      if (seg && (*seg)[i] > 0) {
+        if (covered) ++*covered;
+        continue;
+      }
+      if (is_valid(points[i])) out.push_back(T_frame_camera * points[i]);
+    }
+    return out;
+  }
+
+  void grow_for_detection(Object& obj, const std::vector<Vec3<S>>& points, const std::uint16_t* labels, int label) {
+    const SE3<S> T_volume_camera = obj.volume().pose().inverse() * T_world_camera_;
+    const std::vector<Vec3<S>> p = detection_points(points, labels, label, T_volume_camera);
+    if (int(p.size()) < params_.min_mask_pixels) return;
+    const Box<S> box = percentile_box(p);
+    // Grow to hold the detection's box with the same relative padding as a
+    // new object would get around it, per axis.
+    const S pad = S(0.5) * (params_.object_padding - S(1));
+    const Vec3<S> margin = vec3(pad * (box.hi.x() - box.lo.x()), pad * (box.hi.y() - box.lo.y()),
+                                pad * (box.hi.z() - box.lo.z()));
+    obj.grow_to_fit(box.lo - margin, box.hi + margin, params_.max_object_voxels);
+  }
+
+  std::optional<NewObjectWeights> create_object(const Detections& det, int d, const std::vector<int>& seg,
+                                                 const std::vector<Vec3<S>>& points, FrameResult& result) {
+    const Instance& inst = det.instances[std::size_t(d)];
+    if (is_listed_class(inst.class_name, params_.static_classes)) return std::nullopt;
+    if (int(objects_.size()) >= params_.max_objects) return std::nullopt;
+    int covered = 0, total = 0;
+    const std::uint16_t* labels = det.labels.view().data;
+    const std::vector<Vec3<S>> p =
+        detection_points(points, labels, inst.label, SE3<S>::identity(), &seg, &covered, &total);
+    if (total == 0 || double(covered) >= params_.max_covered_fraction * double(total)) return std::nullopt;
+    if (int(p.size()) < params_.min_mask_pixels) return std::nullopt;
+    const Box<S> cube = padded_cube(percentile_box(p), params_.object_padding);
+    const S side = cube.hi.x() - cube.lo.x();
+    if (!(side > S(0)) || !(norm(cube.center()) <= params_.max_object_distance)) return std::nullopt;
+    const SE3<S> T_world_center = T_world_camera_ * SE3<S>::translation(cube.center());
+    const SE3<S> T_world_volume = T_world_center * SE3<S>::translation(Vec3<S>::constant(-side / S(2)));
+    for (const auto& o : objects_) {
+      const Vec3<S> ext = o->volume().view().extent();
+      if (volume_iou(T_world_volume, Vec3<S>::constant(side), o->volume().pose(), ext) >= params_.max_volume_iou)
+        return std::nullopt;
+    }
+    const int id = next_id_++;
+    auto obj = std::make_unique<Object>(id, inst.class_name, T_world_center, params_.object_voxels,
+                                        side / S(params_.object_voxels), params_.truncation_voxels, backend_);
+    obj->add_class_score(inst.class_name, inst.score);
+    NewObjectWeights w;
+    w.detection = d;
+    std::vector<S> weights(points.size(), S(0));
+    std::vector<std::uint8_t> mask(points.size(), 0);
+    for (std::size_t i = 0; i < points.size(); ++i)
+      if (labels[i] == inst.label && seg[i] <= 0) weights[i] = S(1), mask[i] = 1;
+    w.weights = Image<S, Host>::from_host(camera_.width, camera_.height, weights).template to<B>(backend_);
+    w.mask = Image<std::uint8_t, Host>::from_host(camera_.width, camera_.height, mask).template to<B>(backend_);
+    ObjectRecord rec;
+    rec.id = id;
+    rec.class_name = inst.class_name;
+    rec.person = is_person(*obj);
+    records_.push_back(rec);
+    objects_.push_back(std::move(obj));
+    result.created.push_back(id);
+    return w;
+  }
+
+  // ---- Mapping -----------------------------------------------------------
+
+  void integrate_models(const Image<S, B>& depth, const std::vector<NewObjectWeights>& fresh) {
+    const std::size_t old_objects = objects_.size() - fresh.size();
+    const bool first = frame_ == 0;
+    integrate(background_, depth, camera_, T_world_camera_, first ? nullptr : association_weights(0),
+              params_.background_integration);
+    for (std::size_t k = 0; k < objects_.size(); ++k) {
+      const Image<S, B>* weights =
+          k < old_objects ? association_weights(int(k) + 1) : &fresh[k - old_objects].weights;
+      integrate(objects_[k]->volume(), depth, camera_, T_world_camera_, weights, params_.object_integration);
+    }
+  }
+
+  /// Eq. 6 for every object a detection matched or created, where no other
+  /// object covers the pixel.
+  void update_foreground_counts(const Image<S, B>& depth, const Detections& det, const std::vector<int>& object_of,
+                                const std::vector<NewObjectWeights>& fresh) {
+    const std::size_t old_objects = objects_.size() - fresh.size();
+    const std::vector<int> seg = segmentation_.to_host();
+    const std::uint16_t* labels = det.labels.view().data;
+    const auto update = [&](Object& o, int model_label, const Image<std::uint8_t, B>& mask) {
+      std::vector<std::uint8_t> counted(seg.size());
+      for (std::size_t i = 0; i < seg.size(); ++i) counted[i] = !(seg[i] > 0 && seg[i] != model_label);
+      const auto c = Image<std::uint8_t, Host>::from_host(camera_.width, camera_.height, counted).template to<B>(backend_);
+      update_foreground(o.foreground(), o.volume().pose(), o.volume().truncation(), depth, mask, c, camera_,
+                        T_world_camera_, backend_);
+    };
+    for (std::size_t d = 0; d < object_of.size(); ++d) {
+      const int k = object_of[d];
+      if (k < 0 || std::size_t(k) >= old_objects) continue;
+      std::vector<std::uint8_t> mask(seg.size());
+      for (std::size_t i = 0; i < seg.size(); ++i) mask[i] = labels[i] == det.instances[d].label;
+      const auto m = Image<std::uint8_t, Host>::from_host(camera_.width, camera_.height, mask).template to<B>(backend_);
+      update(*objects_[std::size_t(k)], k + 1, m);
+    }
+    for (std::size_t j = 0; j < fresh.size(); ++j)
+      update(*objects_[old_objects + j], int(old_objects + j) + 1, fresh[j].mask);
+  }
+
+  // ---- Deletion ----------------------------------------------------------
+
+  void delete_objects(FrameResult& result, bool detector_frame, int created) {
+    const int old_objects = int(objects_.size()) - created;
+    std::vector<DeletionReason> why(objects_.size(), DeletionReason::none);
+    const std::vector<int> seg = segmentation_.to_host();
+    const int w = camera_.width, h = camera_.height, border = params_.visibility_border;
+    std::vector<int> inner(objects_.size(), 0), area(objects_.size(), 0);
+    for (int v = 0; v < h; ++v)
+      for (int u = 0; u < w; ++u) {
+        const int k = seg[std::size_t(v * w + u)] - 1;
+        if (k < 0 || k >= old_objects) continue;
+        ++area[std::size_t(k)];
+        if (u >= border && v >= border && u < w - border && v < h - border) ++inner[std::size_t(k)];
+      }
+    for (int k = 0; k < old_objects; ++k) {
+      const Object& o = *objects_[std::size_t(k)];
+      if (detector_frame && o.existence_probability() < params_.min_existence)
+        why[std::size_t(k)] = DeletionReason::existence;
+      else if (!is_person(o) && inner[std::size_t(k)] < params_.min_mask_pixels)
+        why[std::size_t(k)] = DeletionReason::not_visible;
+      else if (!is_person(o) && params_.use_association && frame_ > 0 && k + 1 < associations_.model_count() &&
+               mean_association(k, seg) < params_.min_association)
+        why[std::size_t(k)] = DeletionReason::weak_association;
+    }
+    std::vector<std::unique_ptr<Object>> keep;
+    for (std::size_t k = 0; k < objects_.size(); ++k) {
+      if (why[k] == DeletionReason::none) {
+        keep.push_back(std::move(objects_[k]));
+        continue;
+      }
+      ObjectRecord& rec = record_of(objects_[k]->id());
+      rec.deleted = true;
+      rec.reason = why[k];
+      result.deleted.push_back(objects_[k]->id());
+    }
+    objects_ = std::move(keep);
+  }
+
+  /// Mean association of object k over its rendered mask.
+  double mean_association(int k, const std::vector<int>& seg) const {
+    if (k + 1 >= associations_.model_count()) return 1.0;
+    const std::vector<S> q = associations_.image(k + 1).to_host();
+    double sum = 0;
+    int n = 0;
+    for (std::size_t i = 0; i < seg.size(); ++i)
+      if (seg[i] == k + 1) sum += double(q[i]), ++n;
+    return n > 0 ? sum / n : 0.0;
+  }
+
+  ObjectRecord& record_of(int id) {
+    for (ObjectRecord& r : records_)
+      if (r.id == id) return r;
+    throw std::logic_error("System: no record for object " + std::to_string(id));
+  }
+
+  void record(double timestamp) {
+    camera_trajectory_.push_back({timestamp, T_world_camera_.template cast<double>()});
+    for (const auto& o : objects_) {
+      ObjectRecord& r = record_of(o->id());
+      if (r.trajectory.empty()) r.first_timestamp = timestamp;
+      r.last_timestamp = timestamp;
+      r.class_name = o->class_name();
+      r.trajectory.push_back({timestamp, o->pose().template cast<double>()});
+    }
+  }
+
+  PinholeCamera<S> camera_;
+  SystemParams<S> params_;
+  B backend_;
+  TsdfVolume<S, B> background_;
+  std::vector<std::unique_ptr<Object>> objects_;
+  std::vector<ObjectRecord> records_;
+  int next_id_ = 1;
+  int frame_ = 0;
+  SE3<S> T_world_camera_ = SE3<S>::identity();
+  Trajectory camera_trajectory_;
+
+  Image<S, B> filtered_;
+  Image<Vec3<S>, B> points_;
+  Associations<S, B> associations_;
+  RaycastResult<S, B> background_render_;
+  Image<S, B> object_depth_;
+  Image<int, B> segmentation_;
+};
+
+}  // namespace emfusion
