@@ -6,7 +6,8 @@
 //
 //   track_camera <sequence-dir> <trajectory.txt> [--backend cpu|cuda]
 //                [--max-frames N] [--voxels N] [--voxel-size M] [--stride N] [--tau T]
-//                [--integration paper|refined] [--behind-band F] [--central-gradient]
+//                [--integration paper|refined] [--behind-band F] [--silhouette-guard VOXELS]
+//                [--central-gradient]
 //                [--verbose]
 #include <chrono>
 #include <cstdio>
@@ -34,6 +35,7 @@ struct Options {
   double tau = LevenbergMarquardtParams{}.tau;
   std::string integration = "paper";
   double behind_band = -1;
+  double silhouette_guard = -1;
 };
 
 template <class B>
@@ -57,6 +59,7 @@ void track(const Options& o) {
   lm.tau = o.tau;
   IntegrationParams<S> fusion = o.integration == "refined" ? IntegrationParams<S>::refined() : IntegrationParams<S>{};
   if (o.behind_band > 0) fusion.behind_band = S(o.behind_band);
+  if (o.silhouette_guard >= 0) fusion.silhouette_guard = S(o.silhouette_guard);
 
   Image<S, B> filtered;
   Image<Vec3<S>, B> points;
@@ -114,6 +117,7 @@ Options parse(int argc, char** argv) {
     else if (a == "--voxel-size") o.voxel_size = examples::parse_positive_double(a, v);
     else if (a == "--tau") o.tau = examples::parse_positive_double(a, v);
     else if (a == "--behind-band") o.behind_band = examples::parse_positive_double(a, v);
+    else if (a == "--silhouette-guard") o.silhouette_guard = examples::parse_positive_double(a, v);
     else if (a == "--integration") {
       if (v != "paper" && v != "refined") throw std::invalid_argument("--integration must be paper or refined");
       o.integration = v;

@@ -48,15 +48,14 @@ inline Detections detections_of(const Image<int, Host>& labels, int shape, const
   return d;
 }
 
-/// Parameters for 160x120 frames: a 128^3 background of 2.5 cm, the pixel
-/// thresholds scaled with the image area (1600 px at 640x480 -> 100).
+/// Parameters for 160x120 frames: a 128^3 background of 2.5 cm (the pixel
+/// thresholds scale with the image by themselves: 1600 px at 640x480 is
+/// 100 px here).
 template <class S>
 SystemParams<S> small_params() {
   SystemParams<S> p;
   p.background_voxels = 128;
   p.background_voxel_size = S(0.025);
-  p.min_mask_pixels = 100;
-  p.visibility_border = 5;
   return p;
 }
 

@@ -48,12 +48,15 @@ struct SystemParams {
 
   // Detections (sec. 3.5).
   double match_iou = 0.2;             ///< a detection matches an object above this mask IoU
-  int min_mask_pixels = 1600;         ///< 40 x 40: smaller detections create nothing
+  /// 40 x 40: smaller detections create nothing, objects with fewer visible
+  /// pixels are deleted. This and visibility_border are pixels of a 640x480
+  /// image; the system scales them to other image sizes (area and width).
+  int min_mask_pixels = 1600;
   S max_object_distance = S(5);       ///< metres from the camera to a new object's centre
   double max_volume_iou = 0.5;        ///< a new volume must overlap every other less
   double max_covered_fraction = 0.5;  ///< drop a mask when existing objects cover this much of it
   double min_existence = 0.1;         ///< delete when Ex / (Ex + NonEx) falls below
-  int visibility_border = 20;         ///< pixels; mask pixels nearer the image edge do not count
+  int visibility_border = 20;         ///< pixels (at 640 wide); mask pixels nearer the image edge do not count
   double min_association = 0.1;       ///< delete when the mean association over the mask falls below
   std::vector<std::string> static_classes = default_static_classes();
   bool ignore_person = false;         ///< keep person objects for association only

@@ -348,6 +348,12 @@ class System {
     }
   };
 
+  /// Pixel thresholds are given for 640x480 images.
+  int min_mask_pixels() const {
+    return std::max(1, int(std::lround(double(params_.min_mask_pixels) * camera_.width * camera_.height / (640.0 * 480.0))));
+  }
+  int visibility_border() const { return int(std::lround(double(params_.visibility_border) * camera_.width / 640.0)); }
+
   bool is_person(const Object& o) const { return params_.ignore_person && o.class_name() == "person"; }
 
   // ---- Detections --------------------------------------------------------
@@ -410,7 +416,7 @@ class System {
   void grow_for_detection(Object& obj, const std::vector<Vec3<S>>& points, const std::uint16_t* labels, int label) {
     const SE3<S> T_volume_camera = obj.volume().pose().inverse() * T_world_camera_;
     const std::vector<Vec3<S>> p = detection_points(points, labels, label, T_volume_camera);
-    if (int(p.size()) < params_.min_mask_pixels) return;
+    if (int(p.size()) < min_mask_pixels()) return;
     const Box<S> box = percentile_box(p);
     // Grow to hold the detection's box with the same relative padding as a
     // new object would get around it, per axis.
@@ -430,7 +436,7 @@ class System {
     const std::vector<Vec3<S>> p =
         detection_points(points, labels, inst.label, SE3<S>::identity(), &seg, &covered, &total);
     if (total == 0 || double(covered) >= params_.max_covered_fraction * double(total)) return std::nullopt;
-    if (int(p.size()) < params_.min_mask_pixels) return std::nullopt;
+    if (int(p.size()) < min_mask_pixels()) return std::nullopt;
     const Box<S> cube = padded_cube(percentile_box(p), params_.object_padding);
     const S side = cube.hi.x() - cube.lo.x();
     if (!(side > S(0)) || !(norm(cube.center()) <= params_.max_object_distance)) return std::nullopt;
@@ -509,7 +515,7 @@ class System {
     const int old_objects = int(objects_.size()) - created;
     std::vector<DeletionReason> why(objects_.size(), DeletionReason::none);
     const std::vector<int> seg = segmentation_.to_host();
-    const int w = camera_.width, h = camera_.height, border = params_.visibility_border;
+    const int w = camera_.width, h = camera_.height, border = visibility_border();
     std::vector<int> inner(objects_.size(), 0), area(objects_.size(), 0);
     for (int v = 0; v < h; ++v)
       for (int u = 0; u < w; ++u) {
@@ -522,7 +528,7 @@ class System {
       const Object& o = *objects_[std::size_t(k)];
       if (detector_frame && o.existence_probability() < params_.min_existence)
         why[std::size_t(k)] = DeletionReason::existence;
-      else if (!is_person(o) && inner[std::size_t(k)] < params_.min_mask_pixels)
+      else if (!is_person(o) && inner[std::size_t(k)] < min_mask_pixels())
         why[std::size_t(k)] = DeletionReason::not_visible;
       else if (!is_person(o) && params_.use_association && frame_ > 0 && k + 1 < associations_.model_count() &&
                mean_association(k, seg) < params_.min_association)

@@ -1,0 +1,341 @@
+// emfusion: the full EM-Fusion system on a recording or a built-in synthetic
+// scene, and the evaluation of its outputs (docs/user-guide.md).
+//
+//   emfusion run <input> --output <dir> [--masks <dir>] [--calibration <file>]
+//                [--intrinsics fr1|fr2|fr3|default|fx,fy,cx,cy] [--depth-scale S]
+//                [--backend cpu|cuda] [--config <file>] [--set key=value ...]
+//                [--max-frames N]
+//   emfusion eval <sequence> <output-dir>
+//
+// <input> is a TUM-layout sequence directory or synthetic:<scene> (room,
+// room-small, room1, room8; no data needed). With ground truth, `run`
+// ends by printing the camera and object errors.
+#include <unistd.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cstdio>
+#include <filesystem>
+#include <functional>
+#include <map>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include <CLI/CLI.hpp>
+
+#include "emfusion/eval/ate.hpp"
+#include "emfusion/eval/object_matching.hpp"
+#include "emfusion/eval/rpe.hpp"
+#include "emfusion/io/config.hpp"
+#include "emfusion/io/masks.hpp"
+#include "emfusion/io/ply.hpp"
+#include "emfusion/io/run_outputs.hpp"
+#include "emfusion/io/tum.hpp"
+#include "emfusion/sim/detector.hpp"
+#include "emfusion/sim/dynamic_scene.hpp"
+#include "emfusion/slam/system.hpp"
+#include "emfusion/volume/marching_cubes.hpp"
+
+using namespace emfusion;
+using S = float;
+namespace fs = std::filesystem;
+
+namespace {
+
+struct RunOptions {
+  std::string input, output, masks, calibration, intrinsics, backend = "cpu", config;
+  double depth_scale = 0;
+  std::vector<std::string> overrides;
+  int max_frames = 0;
+  bool verbose = false;
+};
+
+/// Ground truth of an input, when it has any.
+struct GroundTruth {
+  Trajectory camera;
+  std::map<std::string, Trajectory> objects;
+};
+
+/// What the loop needs from any input: frames, a camera, detections.
+struct Input {
+  std::size_t frames = 0;
+  PinholeCamera<double> camera;
+  std::function<double(std::size_t)> timestamp;
+  std::function<Image<float, Host>(std::size_t)> depth;
+  std::function<std::optional<Detections>(int, double)> detect = [](int, double) { return std::nullopt; };
+  std::string detector = "none";
+  std::optional<GroundTruth> truth;
+};
+
+/// synthetic:<scene> names.
+std::optional<sim::DynamicSceneParams> synthetic_params(const std::string& input) {
+  const std::string prefix = "synthetic:";
+  if (input.rfind(prefix, 0) != 0) return std::nullopt;
+  const std::string name = input.substr(prefix.size());
+  sim::DynamicSceneParams p;
+  if (name == "room") return p;
+  if (name == "room-small") {
+    p.width = 320, p.height = 240, p.frames = 150;
+    return p;
+  }
+  if (name == "room1" || name == "room8") {
+    p.moving_objects = name == "room1" ? 1 : 8;
+    return p;
+  }
+  throw std::invalid_argument("unknown synthetic scene '" + name + "' (room, room-small, room1, room8)");
+}
+
+Input open_input(const RunOptions& o) {
+  Input in;
+  if (const auto params = synthetic_params(o.input)) {
+    auto seq = std::make_shared<sim::SyntheticSequence>(*params);
+    // The detector's 40x40 px minimum is for 640x480 images, as the system's.
+    sim::SimulatedDetectorParams dp;
+    dp.min_area = std::max(1, int(dp.min_area * double(params->width) * params->height / (640.0 * 480.0)));
+    auto detector = std::make_shared<sim::SimulatedDetector<float>>(seq->scene(), dp);
+    in.frames = seq->size();
+    in.camera = seq->camera();
+    in.timestamp = [seq](std::size_t i) { return seq->timestamp(i); };
+    in.depth = [seq](std::size_t i) { return seq->depth(i); };
+    in.detect = [detector](int i, double t) { return detector->detect(i, t); };
+    in.detector = "simulated";
+    GroundTruth gt;
+    gt.camera = seq->scene().camera_trajectory();
+    for (int k = 0; k < seq->scene().object_count(); ++k)
+      gt.objects[seq->scene().object_name(k)] = seq->scene().object_trajectory(k);
+    in.truth = gt;
+    return in;
+  }
+  TumOptions topt;
+  if (o.depth_scale > 0) topt.depth_scale = o.depth_scale;
+  if (!o.calibration.empty()) topt.camera = read_calibration(o.calibration);
+  auto seq = std::make_shared<TumSequence>(TumSequence::open(o.input, topt));
+  in.frames = seq->size();
+  in.camera = seq->camera();
+  in.timestamp = [seq](std::size_t i) { return seq->timestamp(i); };
+  in.depth = [seq](std::size_t i) { return seq->depth(i); };
+  const std::string masks = !o.masks.empty() ? o.masks : (fs::path(o.input) / "masks").string();
+  if (!o.masks.empty() || fs::exists(fs::path(masks) / "masks.txt")) {
+    auto dir = std::make_shared<MaskDirectory>(MaskDirectory::open(masks, in.camera.width, in.camera.height));
+    in.detect = [dir](int i, double t) { return dir->detect(i, t); };
+    in.detector = masks;
+  }
+  if (auto gt = seq->ground_truth()) in.truth = GroundTruth{*gt, {}};
+  if (in.truth)
+    for (auto& [name, traj] : seq->ground_truth_objects()) in.truth->objects[name] = traj;
+  return in;
+}
+
+/// Median and 90th percentile of a list of times.
+std::pair<double, double> median_p90(std::vector<double> v) {
+  if (v.empty()) return {0, 0};
+  std::sort(v.begin(), v.end());
+  const auto at = [&](double q) { return v[std::min(v.size() - 1, std::size_t(q * double(v.size() - 1) + 0.5))]; };
+  return {at(0.5), at(0.9)};
+}
+
+void print_evaluation(const Trajectory& est_cam, const std::map<int, Trajectory>& est_objects, const GroundTruth& gt,
+                      JsonWriter* json) {
+  const auto ate = eval::absolute_trajectory_error(est_cam, gt.camera);
+  const auto rpe = eval::relative_pose_error(est_cam, gt.camera);
+  std::printf("camera: ATE RMSE %.2f cm over %zu poses, RPE RMSE %.2f cm/s\n", 100 * ate.rmse, ate.matched,
+              100 * rpe.translation_rmse);
+  if (json) {
+    json->begin("camera").number("ate_rmse_m", ate.rmse).integer("poses", (long long)ate.matched);
+    json->number("rpe_rmse_m_per_s", rpe.translation_rmse).end();
+  }
+  if (gt.objects.empty()) return;
+  const auto objects = eval::evaluate_objects(est_cam, gt.camera, est_objects, gt.objects);
+  std::printf("%-16s %-10s %12s %10s\n", "object", "estimate", "ATE RMSE", "coverage");
+  if (json) json->begin("objects");
+  for (const auto& o : objects) {
+    if (o.evaluated)
+      std::printf("%-16s %-10d %9.2f cm %9.0f %%\n", o.name.c_str(), o.primary, 100 * o.result.ate.rmse,
+                  100 * o.result.coverage);
+    else
+      std::printf("%-16s %-10s %12s %10s  (%s)\n", o.name.c_str(), "-", "-", "0 %", o.problem.c_str());
+    if (json) {
+      json->begin(o.name).integer("estimate", o.primary).boolean("evaluated", o.evaluated);
+      json->number("ate_rmse_m", o.evaluated ? o.result.ate.rmse : NAN);
+      json->number("coverage", o.evaluated ? o.result.coverage : 0.0).end();
+    }
+  }
+  if (json) json->end();
+}
+
+template <class B>
+void run(const RunOptions& o) {
+  SystemParams<S> params;
+  // room-small is the quick scene: a 256^3 background of 2 cm voxels.
+  if (o.input == "synthetic:room-small") params.background_voxels = 256, params.background_voxel_size = S(0.02);
+  if (!o.config.empty()) read_config(o.config, params);
+  for (const auto& a : o.overrides) apply_override(params, a);
+  params.validate();
+  Input in = open_input(o);
+  const std::size_t frames = o.max_frames > 0 ? std::min<std::size_t>(in.frames, std::size_t(o.max_frames)) : in.frames;
+  if (frames == 0) throw std::runtime_error("'" + o.input + "' has no frames");
+  // Fail on an unwritable output before spending time on the frames.
+  create_output_directory(o.output);
+  create_output_directory((fs::path(o.output) / "objects").string());
+  create_output_directory((fs::path(o.output) / "meshes").string());
+
+  const B backend{};
+  System<S, B> system(in.camera.cast<S>(), params, backend);
+  std::vector<StageTimes> times;
+  const bool tty = isatty(fileno(stderr));
+  const auto start = std::chrono::steady_clock::now();
+  for (std::size_t i = 0; i < frames; ++i) {
+    const double t = in.timestamp(i);
+    const Image<S, B> depth = in.depth(i).template to<B>(backend);
+    const std::optional<Detections> det = in.detect(int(i), t);
+    const FrameResult r = system.process(depth, t, det ? &*det : nullptr);
+    times.push_back(r.times);
+    if (o.verbose) {
+      for (const int id : r.created) std::fprintf(stderr, "%sframe %zu: created object %d\n", tty ? "\n" : "", i, id);
+      for (const int id : r.deleted)
+        for (const ObjectRecord& rec : system.object_records())
+          if (rec.id == id)
+            std::fprintf(stderr, "%sframe %zu: deleted object %d (%s): %s\n", tty ? "\n" : "", i, id,
+                         rec.class_name.c_str(), to_string(rec.reason));
+    }
+    const double elapsed = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    const double fps = double(i + 1) / elapsed;
+    if (tty) {
+      const int width = 30, done = int(width * double(i + 1) / double(frames));
+      std::fprintf(stderr, "\r[%s%s] %zu/%zu  %.1f fps  %d objects ", std::string(std::size_t(done), '#').c_str(),
+                   std::string(std::size_t(width - done), '.').c_str(), i + 1, frames, fps, r.live_objects);
+      if (i + 1 == frames) std::fprintf(stderr, "\n");
+    } else if ((i + 1) % 30 == 0 || i + 1 == frames) {
+      std::fprintf(stderr, "frame %zu/%zu: %.1f fps, %d objects\n", i + 1, frames, fps, r.live_objects);
+    }
+  }
+
+  // Outputs (FORMATS.md section 5).
+  write_tum_trajectory((fs::path(o.output) / "camera.txt").string(), system.camera_trajectory());
+  std::vector<ObjectListEntry> list;
+  std::map<int, Trajectory> est_objects;
+  for (const ObjectRecord& r : system.object_records()) {
+    if (r.person) continue;
+    list.push_back({r.id, r.class_name, r.first_timestamp, r.last_timestamp, r.deleted});
+    est_objects[r.id] = r.trajectory;
+    write_tum_trajectory((fs::path(o.output) / "objects" / (std::to_string(r.id) + ".txt")).string(), r.trajectory);
+  }
+  write_object_list((fs::path(o.output) / "objects.txt").string(), list);
+  const auto& bg = system.background();
+  write_ply((fs::path(o.output) / "meshes" / "background.ply").string(),
+            transformed(marching_cubes(bg, S(0), S(1)), bg.pose()));
+  for (const auto& obj : system.objects())
+    write_ply((fs::path(o.output) / "meshes" / ("object_" + std::to_string(obj->id()) + ".ply")).string(),
+              transformed(marching_cubes(obj->volume(), S(0), S(1)), obj->T_object_volume()));
+
+  JsonWriter json;
+  json.begin().string("input", o.input).string("backend", B::name).string("detector", in.detector);
+  json.integer("frames", (long long)frames).integer("objects_created", (long long)list.size());
+  json.begin("settings");
+  for (const auto& e : parameter_table<S>()) json.string(e.name, e.get(system.params()));
+  json.end().begin("timings_ms");
+  const auto stage = [&](const char* name, double StageTimes::*field) {
+    std::vector<double> v;
+    for (const auto& t : times) v.push_back(t.*field);
+    const auto [med, p90] = median_p90(v);
+    json.begin(name).number("median", med).number("p90", p90).end();
+  };
+  stage("preprocess", &StageTimes::preprocess);
+  stage("e_step", &StageTimes::e_step);
+  stage("track_background", &StageTimes::track_background);
+  stage("track_objects", &StageTimes::track_objects);
+  stage("raycast", &StageTimes::raycast);
+  stage("detections", &StageTimes::detections);
+  stage("integrate", &StageTimes::integrate);
+  stage("foreground", &StageTimes::foreground);
+  stage("total", &StageTimes::total);
+  json.end();
+  std::vector<double> totals;
+  for (const auto& t : times) totals.push_back(t.total);
+  const auto [med, p90] = median_p90(totals);
+  std::printf("%zu frames on %s: %.1f ms per frame (median), %.1f ms (90th percentile); %zu objects created\n",
+              frames, B::name, med, p90, list.size());
+  if (in.truth) {
+    json.begin("evaluation");
+    print_evaluation(system.camera_trajectory(), est_objects, *in.truth, &json);
+    json.end();
+  }
+  json.end();
+  write_text_file((fs::path(o.output) / "run.json").string(), json.str());
+  std::printf("wrote %s\n", o.output.c_str());
+}
+
+void evaluate(const std::string& sequence, const std::string& output) {
+  GroundTruth gt;
+  if (const auto params = synthetic_params(sequence)) {
+    const auto scene = sim::make_dynamic_room<float>(*params);
+    gt.camera = scene.camera_trajectory();
+    for (int k = 0; k < scene.object_count(); ++k) gt.objects[scene.object_name(k)] = scene.object_trajectory(k);
+  } else {
+    const TumSequence seq = TumSequence::open(sequence);
+    const auto camera = seq.ground_truth();
+    if (!camera) throw std::runtime_error("'" + sequence + "' has no groundtruth.txt");
+    gt.camera = *camera;
+    for (auto& [name, traj] : seq.ground_truth_objects()) gt.objects[name] = traj;
+  }
+  const Trajectory est_cam = read_tum_trajectory((fs::path(output) / "camera.txt").string());
+  std::map<int, Trajectory> est_objects;
+  const std::string list = (fs::path(output) / "objects.txt").string();
+  if (fs::exists(list))
+    for (const auto& e : read_object_list(list))
+      est_objects[e.id] = read_tum_trajectory((fs::path(output) / "objects" / (std::to_string(e.id) + ".txt")).string());
+  JsonWriter json;
+  json.begin().string("sequence", sequence).string("output", output);
+  print_evaluation(est_cam, est_objects, gt, &json);
+  json.end();
+  write_text_file((fs::path(output) / "eval.json").string(), json.str());
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  CLI::App app{"emfusion: EM-Fusion dynamic object-level RGB-D SLAM"};
+  app.require_subcommand(1);
+  RunOptions o;
+  auto* run_cmd = app.add_subcommand("run", "run the system on a sequence and write trajectories, objects and meshes");
+  run_cmd->add_option("input", o.input, "TUM-layout sequence directory, or synthetic:<scene>")->required();
+  run_cmd->add_option("--output,-o", o.output, "output directory")->required();
+  run_cmd->add_option("--masks", o.masks, "mask directory (default: <input>/masks when present)");
+  run_cmd->add_option("--calibration", o.calibration, "calibration file: fx fy cx cy width height");
+  run_cmd->add_option("--depth-scale", o.depth_scale, "depth PNG value per metre (default 5000)")
+      ->check(CLI::PositiveNumber);
+  run_cmd->add_option("--backend", o.backend, "cpu or cuda")->check(CLI::IsMember({"cpu", "cuda"}));
+  run_cmd->add_option("--config", o.config, "parameter file: key = value per line")->check(CLI::ExistingFile);
+  run_cmd->add_option("--set", o.overrides, "override a parameter: key=value (repeatable)");
+  run_cmd->add_option("--max-frames", o.max_frames, "process at most N frames")->check(CLI::PositiveNumber);
+  run_cmd->add_flag("--verbose,-v", o.verbose, "log object creation and deletion");
+  std::string eval_sequence, eval_output;
+  auto* eval_cmd = app.add_subcommand("eval", "evaluate a run's outputs against a sequence's ground truth");
+  eval_cmd->add_option("sequence", eval_sequence, "sequence directory or synthetic:<scene>")->required();
+  eval_cmd->add_option("output", eval_output, "output directory of `emfusion run`")->required();
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    return app.exit(e);
+  }
+  try {
+    if (*run_cmd) {
+      if (o.backend == "cuda") {
+#if EMFUSION_HAS_CUDA
+        run<Cuda>(o);
+#else
+        throw std::invalid_argument("--backend 'cuda' is not available: this build has no CUDA");
+#endif
+      } else {
+        run<Host>(o);
+      }
+    } else {
+      evaluate(eval_sequence, eval_output);
+    }
+    return 0;
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "emfusion: error: %s\n", e.what());
+    return 1;
+  }
+}

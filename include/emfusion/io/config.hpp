@@ -1,0 +1,189 @@
+// SystemParams by name: config files ("key = value" per line, '#' comments)
+// and command-line overrides ("key=value") set parameters by the names
+// listed in docs/parameters.md; run.json records every value used.
+#pragma once
+
+#include <charconv>
+#include <cmath>
+#include <functional>
+#include <string>
+#include <vector>
+
+#include "emfusion/io/detail/files.hpp"
+#include "emfusion/io/tum.hpp"
+#include "emfusion/slam/params.hpp"
+
+namespace emfusion {
+
+/// One named parameter: how to set it from text and how to print it.
+template <class S>
+struct ParameterEntry {
+  const char* name;
+  const char* meaning;
+  std::function<void(SystemParams<S>&, const std::string&)> set;  // throws std::invalid_argument("...")
+  std::function<std::string(const SystemParams<S>&)> get;
+};
+
+namespace detail::config {
+
+inline double to_number(const std::string& text, const char* name) {
+  double v = 0;
+  const char* first = text.data();
+  const char* last = first + text.size();
+  const auto r = std::from_chars(first, last, v);
+  if (text.empty() || r.ec != std::errc() || r.ptr != last || !std::isfinite(v))
+    throw std::invalid_argument(std::string(name) + ": '" + text + "' is not a number");
+  return v;
+}
+inline int to_integer(const std::string& text, const char* name) {
+  const double v = to_number(text, name);
+  if (v != std::floor(v) || std::fabs(v) > 1e9)
+    throw std::invalid_argument(std::string(name) + ": '" + text + "' is not an integer");
+  return int(v);
+}
+inline bool to_bool(const std::string& text, const char* name) {
+  if (text == "true" || text == "1" || text == "on" || text == "yes") return true;
+  if (text == "false" || text == "0" || text == "off" || text == "no") return false;
+  throw std::invalid_argument(std::string(name) + ": '" + text + "' is not true or false");
+}
+inline std::string print(double v) { return detail::tum::format(v); }
+
+}  // namespace detail::config
+
+/// Every parameter that config files and --set can change.
+template <class S>
+const std::vector<ParameterEntry<S>>& parameter_table() {
+  using P = SystemParams<S>;
+  using namespace detail::config;
+#define EMF_NUMBER(name, field, meaning)                                                          \
+  ParameterEntry<S> {                                                                             \
+    name, meaning, [](P& p, const std::string& v) { p.field = decltype(p.field)(to_number(v, name)); }, \
+        [](const P& p) { return print(double(p.field)); }                                         \
+  }
+#define EMF_INTEGER(name, field, meaning)                                                                       \
+  ParameterEntry<S> {                                                                                           \
+    name, meaning, [](P& p, const std::string& v) { p.field = to_integer(v, name); },                           \
+        [](const P& p) { return std::to_string(p.field); }                                                      \
+  }
+#define EMF_BOOL(name, field, meaning)                                                                          \
+  ParameterEntry<S> {                                                                                           \
+    name, meaning, [](P& p, const std::string& v) { p.field = to_bool(v, name); },                              \
+        [](const P& p) { return std::string(p.field ? "true" : "false"); }                                      \
+  }
+  static const std::vector<ParameterEntry<S>> table{
+      EMF_NUMBER("bilateral_sigma_depth", bilateral.sigma_depth, "bilateral filter range sigma (m)"),
+      EMF_NUMBER("bilateral_sigma_space", bilateral.sigma_space, "bilateral filter spatial sigma (px)"),
+      EMF_INTEGER("bilateral_radius", bilateral.radius, "bilateral filter half window (px)"),
+      EMF_INTEGER("background_voxels", background_voxels, "background volume voxels per axis"),
+      EMF_NUMBER("background_voxel_size", background_voxel_size, "background voxel size (m)"),
+      EMF_NUMBER("truncation_voxels", truncation_voxels, "truncation of every volume (voxels)"),
+      EMF_INTEGER("object_voxels", object_voxels, "initial object volume voxels per axis"),
+      EMF_NUMBER("object_padding", object_padding, "object volume side / largest 10-90 % extent"),
+      EMF_INTEGER("max_object_voxels", max_object_voxels, "largest object volume per axis after resizing"),
+      EMF_INTEGER("max_objects", max_objects, "cap on live objects"),
+      EMF_NUMBER("huber_voxels", huber_voxels, "Huber delta (voxels of the tracked volume)"),
+      EMF_INTEGER("pixel_stride", pixel_stride, "track with every n-th pixel in x and y"),
+      EMF_INTEGER("lm_max_iterations", lm.max_iterations, "Levenberg-Marquardt iterations"),
+      EMF_NUMBER("lm_tau", lm.tau, "Levenberg-Marquardt initial damping factor"),
+      EMF_NUMBER("lm_eps1", lm.eps1, "stop when the gradient falls below"),
+      EMF_NUMBER("lm_eps2", lm.eps2, "stop when the step falls below"),
+      EMF_NUMBER("alpha", likelihood.alpha, "inlier weight of the likelihood mixture (eq. 7)"),
+      EMF_NUMBER("sigma", likelihood.sigma, "Laplace scale of the likelihood (m)"),
+      EMF_NUMBER("p_uniform", likelihood.p_uniform, "uniform outlier density"),
+      EMF_NUMBER("background_max_weight", background_integration.max_weight, "W_max of the background"),
+      EMF_NUMBER("object_max_weight", object_integration.max_weight, "W_max of objects"),
+      EMF_NUMBER("match_iou", match_iou, "detection-to-object mask IoU threshold"),
+      EMF_INTEGER("min_mask_pixels", min_mask_pixels, "smallest detection / visible mask (px)"),
+      EMF_NUMBER("max_object_distance", max_object_distance, "farthest new object centre (m)"),
+      EMF_NUMBER("max_volume_iou", max_volume_iou, "largest volumetric IoU of a new object with others"),
+      EMF_NUMBER("max_covered_fraction", max_covered_fraction, "drop masks this much covered by objects"),
+      EMF_NUMBER("min_existence", min_existence, "delete objects below this existence probability"),
+      EMF_INTEGER("visibility_border", visibility_border, "image border ignored for visibility (px)"),
+      EMF_NUMBER("min_association", min_association, "delete objects with a lower mean association"),
+      EMF_BOOL("ignore_person", ignore_person, "person objects: association only"),
+      EMF_NUMBER("min_foreground", min_foreground, "render object voxels above this p_fg"),
+      EMF_NUMBER("occlusion_margin", occlusion_margin, "object loses to background this far behind (m)"),
+      EMF_BOOL("use_association", use_association, "ablation switch: association likelihoods"),
+      EMF_BOOL("use_map_confidence", use_map_confidence, "ablation switch: map confidence weights"),
+      ParameterEntry<S>{"static_classes", "classes never made objects (comma-separated, or 'none')",
+                        [](P& p, const std::string& v) {
+                          p.static_classes.clear();
+                          if (v == "none") return;
+                          std::size_t pos = 0;
+                          while (pos <= v.size()) {
+                            const std::size_t end = std::min(v.find(',', pos), v.size());
+                            if (end > pos) p.static_classes.push_back(v.substr(pos, end - pos));
+                            pos = end + 1;
+                          }
+                        },
+                        [](const P& p) {
+                          std::string s;
+                          for (const auto& c : p.static_classes) s += (s.empty() ? "" : ",") + c;
+                          return s.empty() ? std::string("none") : s;
+                        }},
+  };
+#undef EMF_NUMBER
+#undef EMF_INTEGER
+#undef EMF_BOOL
+  return table;
+}
+
+/// Sets one parameter by name; unknown names and bad values throw
+/// std::invalid_argument naming them.
+template <class S>
+void set_parameter(SystemParams<S>& params, const std::string& name, const std::string& value) {
+  for (const auto& e : parameter_table<S>())
+    if (name == e.name) return e.set(params, value);
+  throw std::invalid_argument("unknown parameter '" + name + "' (docs/parameters.md lists them)");
+}
+
+/// Applies "key=value".
+template <class S>
+void apply_override(SystemParams<S>& params, const std::string& assignment) {
+  const std::size_t eq = assignment.find('=');
+  if (eq == std::string::npos || eq == 0)
+    throw std::invalid_argument("override '" + assignment + "' is not of the form key=value");
+  set_parameter(params, assignment.substr(0, eq), assignment.substr(eq + 1));
+}
+
+/// Reads a config file: "key = value" per line, '#' comments, blank lines.
+/// Errors name the file, the line and the problem; the result is validated.
+template <class S>
+void read_config(const std::string& path, SystemParams<S>& params) {
+  constexpr const char* where = "read_config";
+  const std::string text = detail::io::read_file(path, where);
+  std::size_t pos = 0;
+  for (int number = 1; pos <= text.size(); ++number) {
+    std::size_t end = text.find('\n', pos);
+    if (end == std::string::npos) end = text.size();
+    std::string line = text.substr(pos, end - pos);
+    pos = end + 1;
+    if (const std::size_t hash = line.find('#'); hash != std::string::npos) line.resize(hash);
+    const auto trim = [](std::string s) {
+      const std::size_t a = s.find_first_not_of(" \t\r");
+      if (a == std::string::npos) return std::string();
+      return s.substr(a, s.find_last_not_of(" \t\r") - a + 1);
+    };
+    line = trim(line);
+    if (line.empty()) continue;
+    const std::size_t eq = line.find('=');
+    const auto fail = [&](const std::string& problem) {
+      throw std::runtime_error(std::string(where) + ": " + detail::io::quoted(path) + " line " +
+                               std::to_string(number) + ": " + problem);
+    };
+    if (eq == std::string::npos) fail("expected 'key = value', got '" + line + "'");
+    try {
+      set_parameter(params, trim(line.substr(0, eq)), trim(line.substr(eq + 1)));
+    } catch (const std::invalid_argument& e) {
+      fail(e.what());
+    }
+    if (end == text.size()) break;
+  }
+  try {
+    params.validate();
+  } catch (const std::invalid_argument& e) {
+    throw std::runtime_error(std::string(where) + ": " + detail::io::quoted(path) + ": " + e.what());
+  }
+}
+
+}  // namespace emfusion
