@@ -146,7 +146,10 @@ TEMPLATE_LIST_TEST_CASE("A detection creates an object; a static class never doe
   int box = 0, box_as_object = 0;
   for (std::size_t i = 0; i < seg.size(); ++i)
     if (lab[i] == 1) ++box, box_as_object += seg[i] == 1;
-  CHECK(box_as_object > 0.8 * box);
+  // After one frame the object lacks a ring of about two pixels along its
+  // silhouette (the silhouette guard leaves those voxels unobserved until
+  // other views fill them), a quarter of this small box's pixels.
+  CHECK(box_as_object > 0.6 * box);
   CHECK(double(norm(cup.objects()[0]->pose().translation() - c)) < 0.005);
 }
 

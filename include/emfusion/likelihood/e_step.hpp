@@ -10,7 +10,8 @@
 // points into its volume frame.
 #pragma once
 
-#include <cstring>
+#include <algorithm>
+#include <cstddef>
 #include <span>
 #include <string>
 #include <type_traits>
@@ -112,9 +113,14 @@ void e_step(const B& backend, const Image<Vec3<S>, B>& points, std::span<const M
   const std::size_t at_poses = detail::place<SE3<S>>(size, models.size());
   const std::size_t at_views = detail::place<ImageView<S>>(size, views.size());
   std::vector<unsigned char> bytes(size);
-  std::memcpy(bytes.data() + at_models, models.data(), models.size() * sizeof(M));
-  std::memcpy(bytes.data() + at_poses, T_volume_camera.data(), models.size() * sizeof(SE3<S>));
-  std::memcpy(bytes.data() + at_views, views.data(), views.size() * sizeof(ImageView<S>));
+  const auto put = [&](std::size_t at, const void* from, std::size_t count) {
+    if (at + count > bytes.size()) return;  // never: `size` covers every entry
+    const auto* b = static_cast<const unsigned char*>(from);
+    std::copy(b, b + count, bytes.begin() + std::ptrdiff_t(at));
+  };
+  put(at_models, models.data(), models.size() * sizeof(M));
+  put(at_poses, T_volume_camera.data(), models.size() * sizeof(SE3<S>));
+  put(at_views, views.data(), views.size() * sizeof(ImageView<S>));
   if (out.scratch_.size() < size) out.scratch_.resize(size);
   thrust::copy(bytes.begin(), bytes.end(), out.scratch_.begin());
   unsigned char* base = thrust::raw_pointer_cast(out.scratch_.data());

@@ -92,6 +92,62 @@ struct FrameResult {
   StageTimes times;
 };
 
+namespace detail::system {
+
+/// Ablation weights: the foreground probability of the pixel's point inside
+/// an object's volume, 0 outside it.
+template <class S>
+struct ForegroundWeight {
+  ImageView<const Vec3<S>> points;
+  TsdfView<S, const S> volume;
+  ForegroundView<S, const float> foreground;
+  SE3<S> T_volume_camera;
+  ImageView<S> out;
+  EMF_HD void operator()(int i) const {
+    const Vec3<S> p = points[i];
+    out[i] = S(0);
+    if (!is_valid(p)) return;
+    const Vec3<S> x = T_volume_camera * p, e = volume.extent();
+    if (x.x() >= S(0) && x.y() >= S(0) && x.z() >= S(0) && x.x() < e.x() && x.y() < e.y() && x.z() < e.z())
+      out[i] = foreground.probability(x);
+  }
+};
+
+/// Keeps, per pixel, the nearest object surface of all objects raycast so far.
+template <class S>
+struct NearestObject {
+  ImageView<const S> depth;
+  ImageView<S> best_depth;
+  ImageView<int> label;
+  int model;
+  EMF_HD void operator()(int i) const {
+    const S d = depth[i];
+    if (!(d > S(0))) return;
+    if (best_depth[i] > S(0) && !(d < best_depth[i])) return;
+    best_depth[i] = d;
+    label[i] = model;
+  }
+};
+
+/// The background wins a pixel where no object was drawn, or where the
+/// object lies more than `margin` behind the background surface.
+template <class S>
+struct ResolveBackground {
+  ImageView<const S> background;  // empty when there are no objects
+  ImageView<const S> object_depth;
+  ImageView<int> label;
+  S margin;
+  ImageView<const Vec3<S>> points;
+  EMF_HD void operator()(int i) const {
+    const S bg = background.empty() ? S(0) : background[i];
+    const bool has_bg = background.empty() ? is_valid(points[i]) : bg > S(0);
+    if (label[i] > 0 && (!(bg > S(0)) || object_depth[i] <= bg + margin)) return;
+    label[i] = has_bg ? 0 : -1;
+  }
+};
+
+}  // namespace detail::system
+
 template <class S, Backend B = Host>
 class System {
  public:
@@ -222,26 +278,11 @@ class System {
     for (std::size_t k = 0; k < objects_.size(); ++k) {
       const Object& o = *objects_[k];
       for_each_index(backend_, points_.size(),
-                     ForegroundWeight{std::as_const(points_).view(), o.volume().view(), o.foreground().view(),
+                     detail::system::ForegroundWeight<S>{std::as_const(points_).view(), o.volume().view(), o.foreground().view(),
                                       o.volume().pose().inverse() * T_world_camera_,
                                       associations_.image(int(k) + 1).view()});
     }
   }
-  struct ForegroundWeight {
-    ImageView<const Vec3<S>> points;
-    TsdfView<S, const S> volume;
-    ForegroundView<S, const float> foreground;
-    SE3<S> T_volume_camera;
-    ImageView<S> out;
-    EMF_HD void operator()(int i) const {
-      const Vec3<S> p = points[i];
-      out[i] = S(0);
-      if (!is_valid(p)) return;
-      const Vec3<S> x = T_volume_camera * p, e = volume.extent();
-      if (x.x() >= S(0) && x.y() >= S(0) && x.z() >= S(0) && x.x() < e.x() && x.y() < e.y() && x.z() < e.z())
-        out[i] = foreground.probability(x);
-    }
-  };
 
   const Image<S, B>* association_weights(int model) const { return &associations_.image(model); }
 
@@ -311,42 +352,16 @@ class System {
       if (is_person(o)) continue;
       raycast(o.volume(), camera_, T_world_camera_, o.rendering(), rp, &o.foreground());
       for_each_index(backend_, w * h,
-                     NearestObject{std::as_const(o).rendering().depth.view(), object_depth_.view(),
+                     detail::system::NearestObject<S>{std::as_const(o).rendering().depth.view(), object_depth_.view(),
                                    segmentation_.view(), int(k) + 1});
     }
     const ImageView<const S> bg =
         objects_.empty() ? ImageView<const S>{} : std::as_const(background_render_).depth.view();
     for_each_index(backend_, w * h,
-                   ResolveBackground{bg, std::as_const(object_depth_).view(), segmentation_.view(),
+                   detail::system::ResolveBackground<S>{bg, std::as_const(object_depth_).view(), segmentation_.view(),
                                      params_.occlusion_margin, points_.view()});
   }
 
-  struct NearestObject {
-    ImageView<const S> depth;
-    ImageView<S> best_depth;
-    ImageView<int> label;
-    int model;
-    EMF_HD void operator()(int i) const {
-      const S d = depth[i];
-      if (!(d > S(0))) return;
-      if (best_depth[i] > S(0) && !(d < best_depth[i])) return;
-      best_depth[i] = d;
-      label[i] = model;
-    }
-  };
-  struct ResolveBackground {
-    ImageView<const S> background;  // empty when there are no objects
-    ImageView<const S> object_depth;
-    ImageView<int> label;
-    S margin;
-    ImageView<const Vec3<S>> points;
-    EMF_HD void operator()(int i) const {
-      const S bg = background.empty() ? S(0) : background[i];
-      const bool has_bg = background.empty() ? is_valid(points[i]) : bg > S(0);
-      if (label[i] > 0 && (!(bg > S(0)) || object_depth[i] <= bg + margin)) return;
-      label[i] = has_bg ? 0 : -1;
-    }
-  };
 
   /// Pixel thresholds are given for 640x480 images.
   int min_mask_pixels() const {
