@@ -137,13 +137,19 @@ std::pair<double, double> median_p90(std::vector<double> v) {
 
 void print_evaluation(const Trajectory& est_cam, const std::map<int, Trajectory>& est_objects, const GroundTruth& gt,
                       JsonWriter* json) {
+  if (est_cam.size() < 3) {
+    std::printf("camera: fewer than 3 poses, no evaluation\n");
+    return;
+  }
   const auto ate = eval::absolute_trajectory_error(est_cam, gt.camera);
-  const auto rpe = eval::relative_pose_error(est_cam, gt.camera);
-  std::printf("camera: ATE RMSE %.2f cm over %zu poses, RPE RMSE %.2f cm/s\n", 100 * ate.rmse, ate.matched,
-              100 * rpe.translation_rmse);
+  // RPE needs pose pairs 1 s apart: short runs have none.
+  const bool has_rpe = est_cam.back().timestamp - est_cam.front().timestamp >= 1.0;
+  const double rpe = has_rpe ? eval::relative_pose_error(est_cam, gt.camera).translation_rmse : NAN;
+  std::printf("camera: ATE RMSE %.2f cm over %zu poses, RPE RMSE %s\n", 100 * ate.rmse, ate.matched,
+              has_rpe ? (std::to_string(100 * rpe).substr(0, 5) + " cm/s").c_str() : "- (run shorter than 1 s)");
   if (json) {
     json->begin("camera").number("ate_rmse_m", ate.rmse).integer("poses", (long long)ate.matched);
-    json->number("rpe_rmse_m_per_s", rpe.translation_rmse).end();
+    json->number("rpe_rmse_m_per_s", rpe).end();
   }
   if (gt.objects.empty()) return;
   const auto objects = eval::evaluate_objects(est_cam, gt.camera, est_objects, gt.objects);
