@@ -59,6 +59,21 @@ SystemParams<S> small_params() {
   return p;
 }
 
+/// A system that processed the box scene's first frame with a detection of
+/// the box as `class_name`.
+template <class S, class B>
+struct FirstFrame {
+  BoxScene<S> scene;
+  Image<int, Host> labels;
+  Image<S, B> depth = scene.template depth<B>(SE3<S>::identity(), &labels);
+  System<S, B> system{scene.camera, small_params<S>()};
+  FrameResult result;
+  explicit FirstFrame(const std::string& class_name) {
+    const Detections det = detections_of(labels, 1, class_name, 0.0);
+    result = system.process(depth, 0.0, &det);
+  }
+};
+
 }  // namespace
 
 TEMPLATE_LIST_TEST_CASE("Resizing an object keeps its fused surface in place", "[slam]", emfusion::test::AllConfigs) {
@@ -112,22 +127,17 @@ TEMPLATE_LIST_TEST_CASE("A detection creates an object; a static class never doe
                         emfusion::test::AllConfigs) {
   using S = typename TestType::Scalar;
   using B = typename TestType::Backend;
-  const BoxScene<S> scene;
-  Image<int, Host> labels;
-  const auto depth = scene.template depth<B>(SE3<S>::identity(), &labels);
+  const FirstFrame<S, B> table("dining_table");
+  CHECK(table.result.detector_frame);
+  CHECK(table.result.detections == 1);
+  CHECK(table.result.created.empty());
+  CHECK(table.system.objects().empty());
 
-  System<S, B> table(scene.camera, small_params<S>());
-  const Detections static_det = detections_of(labels, 1, "dining_table", 0.0);
-  const FrameResult r0 = table.process(depth, 0.0, &static_det);
-  CHECK(r0.detector_frame);
-  CHECK(r0.detections == 1);
-  CHECK(r0.created.empty());
-  CHECK(table.objects().empty());
-
-  System<S, B> cup(scene.camera, small_params<S>());
-  const Detections det = detections_of(labels, 1, "cup", 0.0);
-  const FrameResult r1 = cup.process(depth, 0.0, &det);
-  REQUIRE(r1.created.size() == 1);
+  FirstFrame<S, B> first("cup");
+  System<S, B>& cup = first.system;
+  const auto& depth = first.depth;
+  const auto& labels = first.labels;
+  REQUIRE(first.result.created.size() == 1);
   REQUIRE(cup.objects().size() == 1);
   const auto& obj = *cup.objects()[0];
   CHECK(obj.class_name() == "cup");
@@ -157,12 +167,10 @@ TEMPLATE_LIST_TEST_CASE("Existence falls below 0.1 after repeated misses and the
                         emfusion::test::AllConfigs) {
   using S = typename TestType::Scalar;
   using B = typename TestType::Backend;
-  const BoxScene<S> scene;
-  Image<int, Host> labels;
-  const auto depth = scene.template depth<B>(SE3<S>::identity(), &labels);
-  System<S, B> sys(scene.camera, small_params<S>());
-  const Detections found = detections_of(labels, 1, "cup", 0.0);
-  sys.process(depth, 0.0, &found);
+  FirstFrame<S, B> first("cup");
+  System<S, B>& sys = first.system;
+  const auto& depth = first.depth;
+  const auto& labels = first.labels;
   REQUIRE(sys.objects().size() == 1);
   // The detector keeps running and finding nothing: p_ex = 1 / (1 + misses).
   int misses = 0;
@@ -184,12 +192,9 @@ TEMPLATE_LIST_TEST_CASE("An object that leaves the view is deleted", "[slam]",
                         emfusion::test::AllConfigs) {
   using S = typename TestType::Scalar;
   using B = typename TestType::Backend;
-  const BoxScene<S> scene;
-  Image<int, Host> labels;
-  System<S, B> sys(scene.camera, small_params<S>());
-  const auto depth0 = scene.template depth<B>(SE3<S>::identity(), &labels);
-  const Detections det = detections_of(labels, 1, "cup", 0.0);
-  sys.process(depth0, 0.0, &det);
+  FirstFrame<S, B> first("cup");
+  System<S, B>& sys = first.system;
+  const BoxScene<S>& scene = first.scene;
   REQUIRE(sys.objects().size() == 1);
   // The camera pans right in small steps until the box is out of view.
   bool deleted = false;
