@@ -145,8 +145,9 @@ void print_evaluation(const Trajectory& est_cam, const std::map<int, Trajectory>
   // RPE needs pose pairs 1 s apart: short runs have none.
   const bool has_rpe = est_cam.back().timestamp - est_cam.front().timestamp >= 1.0;
   const double rpe = has_rpe ? eval::relative_pose_error(est_cam, gt.camera).translation_rmse : NAN;
-  std::printf("camera: ATE RMSE %.2f cm over %zu poses, RPE RMSE %s\n", 100 * ate.rmse, ate.matched,
-              has_rpe ? (std::to_string(100 * rpe).substr(0, 5) + " cm/s").c_str() : "- (run shorter than 1 s)");
+  char rpe_text[64] = "- (run shorter than 1 s)";
+  if (has_rpe) std::snprintf(rpe_text, sizeof(rpe_text), "%.2f cm/s", 100 * rpe);
+  std::printf("camera: ATE RMSE %.2f cm over %zu poses, RPE RMSE %s\n", 100 * ate.rmse, ate.matched, rpe_text);
   if (json) {
     json->begin("camera").number("ate_rmse_m", ate.rmse).integer("poses", (long long)ate.matched);
     json->number("rpe_rmse_m_per_s", rpe).end();

@@ -47,10 +47,7 @@ struct PaperLikelihood {
 
   EMF_HD S likelihood(const Vec3<S>& p) const {
     // Outside the grid the model says nothing about the point.
-    const Vec3<S> extent = volume.extent();
-    if (!(p.x() >= S(0) && p.y() >= S(0) && p.z() >= S(0) && p.x() < extent.x() && p.y() < extent.y() &&
-          p.z() < extent.z()))
-      return S(0);
+    if (!volume.contains_point(p)) return S(0);
     // Inside it, space never observed is as far from a surface as the map
     // can say: the truncation distance. This keeps a new object's empty
     // volume at the outlier level instead of zero.

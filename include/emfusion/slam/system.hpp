@@ -156,8 +156,7 @@ class System {
 
   System(const PinholeCamera<S>& camera, const SystemParams<S>& params = {}, B backend = B{})
       : camera_(camera), params_(params), backend_(backend), background_(background_geometry(params), backend) {
-    camera_.validate("System");
-    params_.validate();
+    camera_.validate("System");  // the parameters were validated by background_geometry
   }
 
   /// Processes one depth frame (metres, 0 = invalid, camera size) with the
@@ -175,20 +174,23 @@ class System {
 
     if (frame_ > 0) track(result, clock);
     render_models();
+    // Detection handling and the deletion rules read the segmentation on
+    // the host; it does not change for the rest of the frame.
+    const std::vector<int> seg = segmentation_.to_host();
     result.times.raycast = clock.lap();
 
     // Mapping weights of new objects: their detection masks.
     std::vector<NewObjectWeights> fresh;
     std::vector<int> matched_object_of_detection;
-    if (detections) handle_detections(*detections, result, fresh, matched_object_of_detection);
+    if (detections) handle_detections(*detections, seg, result, fresh, matched_object_of_detection);
     result.times.detections = clock.lap();
 
     integrate_models(depth, fresh);
     result.times.integrate = clock.lap();
-    if (detections) update_foreground_counts(depth, *detections, matched_object_of_detection, fresh);
+    if (detections) update_foreground_counts(depth, *detections, seg, matched_object_of_detection, fresh);
     result.times.foreground = clock.lap();
 
-    delete_objects(result, detections != nullptr, int(fresh.size()));
+    delete_objects(seg, result, detections != nullptr, int(fresh.size()));
     record(timestamp);
     result.live_objects = int(objects_.size());
     result.times.total = clock.total();
@@ -234,6 +236,8 @@ class System {
     int detection = -1;
   };
 
+  /// Validates the parameters first: the background is the first thing
+  /// built from them (a member initializer, before the constructor's body).
   static VolumeGeometry<S> background_geometry(const SystemParams<S>& p) {
     p.validate();
     VolumeGeometry<S> g;
@@ -373,15 +377,14 @@ class System {
 
   // ---- Detections --------------------------------------------------------
 
-  void handle_detections(const Detections& det, FrameResult& result, std::vector<NewObjectWeights>& fresh,
-                         std::vector<int>& object_of_detection) {
+  void handle_detections(const Detections& det, const std::vector<int>& seg, FrameResult& result,
+                         std::vector<NewObjectWeights>& fresh, std::vector<int>& object_of_detection) {
     detail::require(det.labels.width() == camera_.width && det.labels.height() == camera_.height, "System::process",
                     "detection label image is " + std::to_string(det.labels.width()) + "x" +
                         std::to_string(det.labels.height()) + " but the camera is " + std::to_string(camera_.width) +
                         "x" + std::to_string(camera_.height));
     result.detector_frame = true;
     result.detections = int(det.instances.size());
-    const std::vector<int> seg = segmentation_.to_host();
     const DetectionMatch match =
         match_detections(mask_iou(det, seg, int(objects_.size())), params_.match_iou);
     object_of_detection = match.object_of;
@@ -500,10 +503,9 @@ class System {
 
   /// Eq. 6 for every object a detection matched or created, where no other
   /// object covers the pixel.
-  void update_foreground_counts(const Image<S, B>& depth, const Detections& det, const std::vector<int>& object_of,
-                                const std::vector<NewObjectWeights>& fresh) {
+  void update_foreground_counts(const Image<S, B>& depth, const Detections& det, const std::vector<int>& seg,
+                                const std::vector<int>& object_of, const std::vector<NewObjectWeights>& fresh) {
     const std::size_t old_objects = objects_.size() - fresh.size();
-    const std::vector<int> seg = segmentation_.to_host();
     const std::uint16_t* labels = det.labels.view().data;
     const auto update = [&](Object& o, int model_label, const Image<std::uint8_t, B>& mask) {
       std::vector<std::uint8_t> counted(seg.size());
@@ -526,17 +528,15 @@ class System {
 
   // ---- Deletion ----------------------------------------------------------
 
-  void delete_objects(FrameResult& result, bool detector_frame, int created) {
+  void delete_objects(const std::vector<int>& seg, FrameResult& result, bool detector_frame, int created) {
     const int old_objects = int(objects_.size()) - created;
     std::vector<DeletionReason> why(objects_.size(), DeletionReason::none);
-    const std::vector<int> seg = segmentation_.to_host();
     const int w = camera_.width, h = camera_.height, border = visibility_border();
-    std::vector<int> inner(objects_.size(), 0), area(objects_.size(), 0);
+    std::vector<int> inner(objects_.size(), 0);
     for (int v = 0; v < h; ++v)
       for (int u = 0; u < w; ++u) {
         const int k = seg[std::size_t(v * w + u)] - 1;
         if (k < 0 || k >= old_objects) continue;
-        ++area[std::size_t(k)];
         if (u >= border && v >= border && u < w - border && v < h - border) ++inner[std::size_t(k)];
       }
     for (int k = 0; k < old_objects; ++k) {
@@ -545,7 +545,7 @@ class System {
         why[std::size_t(k)] = DeletionReason::existence;
       else if (!is_person(o) && inner[std::size_t(k)] < min_mask_pixels())
         why[std::size_t(k)] = DeletionReason::not_visible;
-      else if (!is_person(o) && params_.use_association && frame_ > 0 && k + 1 < associations_.model_count() &&
+      else if (!is_person(o) && params_.use_association && frame_ > 0 &&
                mean_association(k, seg) < params_.min_association)
         why[std::size_t(k)] = DeletionReason::weak_association;
     }

@@ -57,6 +57,11 @@ struct TsdfView {
   }
   /// Volume-frame extent of the grid along each axis.
   EMF_HD Vec3<S> extent() const { return vec3(S(nx) * voxel_size, S(ny) * voxel_size, S(nz) * voxel_size); }
+  /// True if the volume-frame point lies in the box [0, extent) (false for NaN).
+  EMF_HD bool contains_point(const Vec3<S>& p) const {
+    const Vec3<S> e = extent();
+    return p.x() >= S(0) && p.y() >= S(0) && p.z() >= S(0) && p.x() < e.x() && p.y() < e.y() && p.z() < e.z();
+  }
 
   /// Trilinear SDF at volume-frame point p. Returns false (and leaves the
   /// outputs alone) if p is outside the grid of voxel centres or any of the
