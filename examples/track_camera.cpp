@@ -6,7 +6,7 @@
 //
 //   track_camera <sequence-dir> <trajectory.txt> [--backend cpu|cuda]
 //                [--max-frames N] [--voxels N] [--voxel-size M] [--stride N] [--tau T]
-//                [--integration paper|refined] [--behind-band F] [--silhouette-guard VOXELS]
+//                [--integration paper|refined] [--behind-band F] [--silhouette-guard G] [--bilateral-radius R] [--silhouette-guard VOXELS]
 //                [--central-gradient]
 //                [--verbose]
 #include <chrono>
@@ -36,6 +36,7 @@ struct Options {
   std::string integration = "paper";
   double behind_band = -1;
   double silhouette_guard = -1;
+  int bilateral_radius = -1;  // -1: the filter's default
 };
 
 template <class B>
@@ -61,6 +62,8 @@ void track(const Options& o) {
   if (o.behind_band > 0) fusion.behind_band = S(o.behind_band);
   if (o.silhouette_guard >= 0) fusion.silhouette_guard = S(o.silhouette_guard);
 
+  BilateralParams<S> bilateral;
+  if (o.bilateral_radius >= 0) bilateral.radius = o.bilateral_radius;
   Image<S, B> filtered;
   Image<Vec3<S>, B> points;
   SE3<S> T_world_camera;
@@ -74,7 +77,7 @@ void track(const Options& o) {
   for (int i = 0; i < frames; ++i) {
     const Image<S, B> depth = seq.depth(i).template to<B>();
     auto t0 = clock::now();
-    bilateral_filter(depth, filtered);
+    bilateral_filter(depth, filtered, bilateral);
     back_project(filtered, camera, points);
     SolveReport report;
     if (i > 0)
@@ -117,6 +120,7 @@ Options parse(int argc, char** argv) {
     else if (a == "--voxel-size") o.voxel_size = examples::parse_positive_double(a, v);
     else if (a == "--tau") o.tau = examples::parse_positive_double(a, v);
     else if (a == "--behind-band") o.behind_band = examples::parse_positive_double(a, v);
+    else if (a == "--bilateral-radius") o.bilateral_radius = v == "0" ? 0 : examples::parse_positive_int(a, v, 16);
     else if (a == "--silhouette-guard") o.silhouette_guard = examples::parse_positive_double(a, v);
     else if (a == "--integration") {
       if (v != "paper" && v != "refined") throw std::invalid_argument("--integration must be paper or refined");
@@ -126,7 +130,7 @@ Options parse(int argc, char** argv) {
   }
   if (positional.size() != 2)
     throw std::invalid_argument("usage: track_camera <sequence-dir> <trajectory.txt> [--backend cpu|cuda] "
-                                "[--max-frames N] [--voxels N] [--voxel-size M] [--stride N] [--tau T] [--integration paper|refined] [--behind-band F] [--central-gradient] [--verbose]");
+                                "[--max-frames N] [--voxels N] [--voxel-size M] [--stride N] [--tau T] [--integration paper|refined] [--behind-band F] [--silhouette-guard G] [--bilateral-radius R] [--central-gradient] [--verbose]");
   o.sequence = positional[0], o.output = positional[1];
   return o;
 }

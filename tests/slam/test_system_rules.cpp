@@ -18,12 +18,14 @@ using emfusion::test::Approx;
 
 namespace {
 
-/// A wall 2 m ahead and a box 0.8 m in front of it, seen by a 160x120 camera.
+/// A wall 2 m ahead and a box 0.8 m in front of it, seen by a 160x120 camera
+/// (`scale` 2: 320x240).
 template <class S>
 struct BoxScene {
-  PinholeCamera<S> camera{S(140), S(140), S(79.5), S(59.5), 160, 120};
+  PinholeCamera<S> camera;
   sim::Scene<S> scene;
-  BoxScene(const Vec3<S>& box_center = vec3(S(0), S(0), S(1.2))) {
+  explicit BoxScene(const Vec3<S>& box_center = vec3(S(0), S(0), S(1.2)), int scale = 1)
+      : camera{S(140 * scale), S(140 * scale), S(80 * scale - 0.5), S(60 * scale - 0.5), 160 * scale, 120 * scale} {
     scene.add(sim::make_plane(sim::look_at(vec3(S(0), S(0), S(2)), Vec3<S>::zero(), vec3(S(0), S(-1), S(0)))));
     scene.add(sim::make_box(SE3<S>(so3_exp(vec3(S(0.2), S(0.4), S(0))), box_center), vec3(S(0.15), S(0.1), S(0.12))));
   }
@@ -68,7 +70,8 @@ struct FirstFrame {
   Image<S, B> depth = scene.template depth<B>(SE3<S>::identity(), &labels);
   System<S, B> system{scene.camera, small_params<S>()};
   FrameResult result;
-  explicit FirstFrame(const std::string& class_name) {
+  explicit FirstFrame(const std::string& class_name, int scale = 1)
+      : scene(vec3(S(0), S(0), S(1.2)), scale) {
     const Detections det = detections_of(labels, 1, class_name, 0.0);
     result = system.process(depth, 0.0, &det);
   }
@@ -156,11 +159,48 @@ TEMPLATE_LIST_TEST_CASE("A detection creates an object; a static class never doe
   int box = 0, box_as_object = 0;
   for (std::size_t i = 0; i < seg.size(); ++i)
     if (lab[i] == 1) ++box, box_as_object += seg[i] == 1;
-  // After one frame the object lacks a ring of about two pixels along its
-  // silhouette (the silhouette guard leaves those voxels unobserved until
-  // other views fill them), a quarter of this small box's pixels.
-  CHECK(box_as_object > 0.6 * box);
+  // After one frame the voxels along the silhouette are only partly
+  // observed (the silhouette guard); rendering interpolates over the
+  // observed ones, so the object covers nearly all of the box.
+  CHECK(box_as_object > 0.9 * box);
   CHECK(double(norm(cup.objects()[0]->pose().translation() - c)) < 0.005);
+}
+
+TEMPLATE_LIST_TEST_CASE("A resting object settles and stays associated", "[slam]", emfusion::test::AllConfigs) {
+  using S = typename TestType::Scalar;
+  using B = typename TestType::Backend;
+  FirstFrame<S, B> first("cup", 2);
+  System<S, B>& sys = first.system;
+  REQUIRE(sys.objects().size() == 1);
+  const SE3<S> start = sys.objects()[0]->pose();
+  // Without a detector, the same view for 40 frames. Object voxels here are
+  // about a pixel wide, so the first solves move the object by the
+  // discretisation bias of a one-view model (a few mm and about a degree,
+  // docs/system.md); after that it must stay put. Before object poses were
+  // orthonormalised, the pose error tripled every frame and the object was
+  // lost within 15 frames.
+  SE3<S> at_20;
+  for (int k = 1; k <= 40; ++k) {
+    const FrameResult r = sys.process(first.depth, k / 30.0);
+    REQUIRE(r.live_objects == 1);
+    if (k == 20) at_20 = sys.objects()[0]->pose();
+  }
+  const SE3<S> total = start.inverse() * sys.objects()[0]->pose();
+  CHECK(double(norm(total.translation())) < 0.006);
+  CHECK(double(norm(so3_log(total.rotation()))) < 0.05);
+  const SE3<S> late = at_20.inverse() * sys.objects()[0]->pose();
+  CHECK(double(norm(late.translation())) < 0.002);
+  CHECK(double(norm(so3_log(late.rotation()))) < 0.01);
+  // It keeps its share of the pixels (the paper's Fig. 2: a resting object
+  // shares them with the background).
+  const auto seg = sys.segmentation().to_host();
+  const auto q = sys.associations().image(1).to_host();
+  double sum = 0;
+  int n = 0;
+  for (std::size_t i = 0; i < seg.size(); ++i)
+    if (seg[i] == 1) sum += double(q[i]), ++n;
+  REQUIRE(n > 0);
+  CHECK(sum / n > 0.3);
 }
 
 TEMPLATE_LIST_TEST_CASE("Existence falls below 0.1 after repeated misses and the object is deleted", "[slam]",

@@ -204,6 +204,18 @@ class SE3 {
     return normalized(q);
   }
 
+  /// The same pose with R replaced by the nearest rotation (three Newton steps
+  /// of the polar decomposition, R <- R (3 I - R^T R) / 2, enough for the
+  /// drift that products of poses accumulate). Poses that are composed and
+  /// inverted over and over, such as an object's pose updated every frame,
+  /// need it: inverse() is the transpose, so an error e in R^T R grows to
+  /// about 3 e in each round trip through T^-1 (T ...) and blows up.
+  EMF_HD SE3 orthonormalized() const {
+    Mat3<S> R = R_;
+    for (int k = 0; k < 3; ++k) R = S(0.5) * (R * (S(3) * Mat3<S>::identity() - R.transpose() * R));
+    return SE3(R, t_);
+  }
+
   EMF_HD const Mat3<S>& rotation() const { return R_; }
   EMF_HD const Vec3<S>& translation() const { return t_; }
   EMF_HD Mat3<S>& rotation() { return R_; }

@@ -63,8 +63,10 @@ class ObjectModel {
   const std::string& class_name() const { return class_name_; }
 
   const SE3<S>& pose() const { return T_world_object_; }  ///< T_world_object
+  /// Sets T_world_object (its rotation made orthonormal: the pose is
+  /// updated every frame from products of poses).
   void set_pose(const SE3<S>& T_world_object) {
-    T_world_object_ = T_world_object;
+    T_world_object_ = T_world_object.orthonormalized();
     sync_volume_pose();
   }
   const SE3<S>& T_object_volume() const { return T_object_volume_; }

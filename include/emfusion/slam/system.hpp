@@ -321,13 +321,11 @@ class System {
         SolveReport report;
         // The object starts where it was; the solver finds how it moved
         // relative to the camera.
-        const SE3<S> T_world_volume = o.volume().pose();
-        const SE3<S> moved = align_to_volume(o.volume(), points_, association_weights(int(k) + 1), T_world_camera_,
-                                             norm, obj_align, params_.lm, &report);
-        if (report.converged() && report.terms >= params_.min_object_terms) {
-          const SE3<S> T_volume_camera = T_world_volume.inverse() * moved;
+        const SE3<S> T_volume_camera =
+            align_in_volume(o.volume(), points_, association_weights(int(k) + 1),
+                            o.volume().pose().inverse() * T_world_camera_, norm, obj_align, params_.lm, &report);
+        if (report.converged() && report.terms >= params_.min_object_terms)
           o.set_pose(T_world_camera_ * T_volume_camera.inverse() * o.T_object_volume().inverse());
-        }
         result.objects.push_back(report);
       }
       result.times.track_objects = clock.lap();
@@ -471,10 +469,17 @@ class System {
     obj->add_class_score(inst.class_name, inst.score);
     NewObjectWeights w;
     w.detection = d;
+    // Outside the mask a pixel gets the association the E-step would give a
+    // model that does not explain it beside one that does, so that the
+    // border of the first view is observed as on later frames.
+    const S outside = unexplained_association();
     std::vector<S> weights(points.size(), S(0));
     std::vector<std::uint8_t> mask(points.size(), 0);
-    for (std::size_t i = 0; i < points.size(); ++i)
-      if (labels[i] == inst.label && seg[i] <= 0) weights[i] = S(1), mask[i] = 1;
+    for (std::size_t i = 0; i < points.size(); ++i) {
+      if (seg[i] > 0) continue;  // another object's pixel
+      if (labels[i] == inst.label) weights[i] = S(1), mask[i] = 1;
+      else weights[i] = outside;
+    }
     w.weights = Image<S, Host>::from_host(camera_.width, camera_.height, weights).template to<B>(backend_);
     w.mask = Image<std::uint8_t, Host>::from_host(camera_.width, camera_.height, mask).template to<B>(backend_);
     ObjectRecord rec;
@@ -485,6 +490,14 @@ class System {
     objects_.push_back(std::move(obj));
     result.created.push_back(id);
     return w;
+  }
+
+  /// Eq. 5 for a pixel that one model explains perfectly (sdf 0, p_fg 1)
+  /// and another not at all (the outlier term only): the second's share.
+  S unexplained_association() const {
+    const LikelihoodParams<S>& l = params_.likelihood;
+    const S outlier = (S(1) - l.alpha) * l.p_uniform;
+    return outlier / (l.alpha / (S(2) * l.sigma) + S(2) * outlier);
   }
 
   // ---- Mapping -----------------------------------------------------------

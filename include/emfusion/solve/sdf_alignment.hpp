@@ -92,6 +92,25 @@ SdfAlignmentTerms<S, Store> make_sdf_alignment(const TsdfVolume<S, B, Store>& vo
   return t;
 }
 
+/// Minimises the robust SDF alignment cost over the camera pose in the
+/// volume's frame with Levenberg-Marquardt, starting at `T_volume_camera`;
+/// returns the solved T_volume_camera. Use it when the volume's own pose is
+/// what is estimated (a moving object): it avoids a round trip through the
+/// volume's world pose.
+template <class S, Backend B, class Store, class Norm>
+  requires RobustNorm<Norm, S>
+SE3<S> align_in_volume(const TsdfVolume<S, B, Store>& volume, const Image<Vec3<S>, B>& points,
+                       const Image<S, B>* association, const SE3<S>& T_volume_camera, const Norm& norm,
+                       const SdfAlignmentParams<S>& params = {}, const LevenbergMarquardtParams& lm = {},
+                       SolveReport* report = nullptr) {
+  const auto terms = make_sdf_alignment(volume, points, association, params);
+  const B& backend = volume.backend();
+  const auto lin = [&](const SE3<S>& T, const SE3<S>* reference) {
+    return linearize(backend, terms, norm, T, reference);
+  };
+  return levenberg_marquardt(lin, T_volume_camera, lm, report);
+}
+
 /// Tracks a camera against a volume: minimises the robust SDF alignment cost
 /// over T_world_camera with Levenberg-Marquardt, starting at `T_world_camera`.
 template <class S, Backend B, class Store, class Norm>
@@ -100,14 +119,8 @@ SE3<S> align_to_volume(const TsdfVolume<S, B, Store>& volume, const Image<Vec3<S
                        const Image<S, B>* association, const SE3<S>& T_world_camera, const Norm& norm,
                        const SdfAlignmentParams<S>& params = {}, const LevenbergMarquardtParams& lm = {},
                        SolveReport* report = nullptr) {
-  const auto terms = make_sdf_alignment(volume, points, association, params);
-  const B& backend = volume.backend();
-  const auto lin = [&](const SE3<S>& T_volume_camera, const SE3<S>* reference) {
-    return linearize(backend, terms, norm, T_volume_camera, reference);
-  };
-  const SE3<S> T_volume_camera =
-      levenberg_marquardt(lin, volume.pose().inverse() * T_world_camera, lm, report);
-  return volume.pose() * T_volume_camera;
+  return volume.pose() * align_in_volume(volume, points, association, volume.pose().inverse() * T_world_camera,
+                                         norm, params, lm, report);
 }
 
 }  // namespace emfusion

@@ -140,8 +140,10 @@ template <class S, class F>
 SE3<S> levenberg_marquardt(F&& linearize, const SE3<S>& start, const LevenbergMarquardtParams& p = {},
                            SolveReport* report_out = nullptr) {
   SolveReport report;
-  SE3<double> T = start.template cast<double>();
-  SE3<S> T_s = start;
+  // A start whose rotation is not quite orthonormal (products of float poses)
+  // would pass its error on to the result: start at the nearest rotation.
+  SE3<double> T = start.template cast<double>().orthonormalized();
+  SE3<S> T_s = T.template cast<S>();
   NormalEquations6 n = linearize(T_s, static_cast<const SE3<S>*>(nullptr));
   if (detail::start(n, p.min_terms, report)) {
     double mu = p.tau * detail::max_diagonal(n);
@@ -204,8 +206,10 @@ SE3<S> gauss_newton(F&& linearize, const SE3<S>& start, const GaussNewtonParams&
                     SolveReport* report_out = nullptr) {
   SolveReport report;
   const SE3<S>* no_reference = nullptr;
-  SE3<double> T = start.template cast<double>();
-  SE3<S> T_s = start;
+  // A start whose rotation is not quite orthonormal (products of float poses)
+  // would pass its error on to the result: start at the nearest rotation.
+  SE3<double> T = start.template cast<double>().orthonormalized();
+  SE3<S> T_s = T.template cast<S>();
   NormalEquations6 n = linearize(T_s, no_reference);
   if (detail::start(n, p.min_terms, report)) {
     report.reason = StopReason::max_iterations;

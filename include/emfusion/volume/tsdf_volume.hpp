@@ -77,6 +77,27 @@ struct TsdfView {
     return true;
   }
 
+  /// Trilinear SDF over the observed voxels of the eight around p, their
+  /// interpolation weights renormalised: true where those voxels carry at
+  /// least `min_coverage` of the weight. Rendering uses it, so that the
+  /// holes a single noisy frame leaves (missing depth pixels) do not punch
+  /// holes into the drawn surface; tracking keeps the strict `sample`.
+  EMF_HD bool sample_observed(const Vec3<S>& p, S& sdf_out, S min_coverage = S(0.5)) const {
+    Corner c;
+    if (!corner(p, c)) return false;
+    S sum = S(0), covered = S(0);
+    for (int k = 0; k < 8; ++k) {
+      const std::int64_t i = index(c.x + (k & 1), c.y + ((k >> 1) & 1), c.z + ((k >> 2) & 1));
+      if (!(S(weight[i]) > S(0))) continue;
+      const S a = ((k & 1) ? c.fx : S(1) - c.fx) * ((k & 2) ? c.fy : S(1) - c.fy) * ((k & 4) ? c.fz : S(1) - c.fz);
+      sum += a * S(sdf[i]);
+      covered += a;
+    }
+    if (!(covered >= min_coverage) || !(covered > S(0))) return false;
+    sdf_out = sum / covered;
+    return true;
+  }
+
   /// Trilinear SDF and its exact gradient (of the trilinear interpolant) at p.
   EMF_HD bool sample_with_gradient(const Vec3<S>& p, S& sdf_out, Vec3<S>& gradient, S* weight_out = nullptr) const {
     Corner c;
