@@ -10,13 +10,7 @@
 # Environment: EMFUSION_JOBS overrides the parallel build jobs (default: nproc).
 set -euo pipefail
 
-repo_root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
-cd "$repo_root"
-
-jobs="${EMFUSION_JOBS:-$(nproc)}"
-export OMP_WAIT_POLICY="${OMP_WAIT_POLICY:-passive}"
-
-say() { echo "==> [run.sh] $*"; }
+source "$(dirname "${BASH_SOURCE[0]}")/cpu-build.sh"
 
 input="synthetic:room-small"
 output="out/room-small"
@@ -29,14 +23,9 @@ while (($#)); do
   esac
 done
 
-say "installing dependencies (scripts/setup-debian.sh)"
-bash scripts/setup-debian.sh
-
-say "configuring build/ (CPU, Release)"
-cmake -S . -B build -DEMFUSION_CUDA=OFF -DCMAKE_BUILD_TYPE=Release
-say "building the app with -j${jobs}"
-cmake --build build -j "$jobs" --target emfusion_app
+cpu_build emfusion_app
 
 say "running: build/examples/emfusion run $input --output $output ${args[*]:-}"
 build/examples/emfusion run "$input" --output "$output" "${args[@]}"
-say "done; results are in ${repo_root}/${output}"
+[[ $output == /* ]] || output="${repo_root}/${output}"
+say "done; results are in ${output}"
