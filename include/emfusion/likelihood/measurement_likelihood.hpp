@@ -34,6 +34,13 @@ struct LikelihoodParams {
   S alpha = S(0.8);      ///< weight of the Laplace (inlier) component
   S sigma = S(0.02);     ///< Laplace scale, metres
   S p_uniform = S(1);    ///< density of the uniform outlier component
+
+  /// Eq. 7 for a point at signed distance `sdf` from the surface with
+  /// foreground probability `p_fg`.
+  EMF_HD S mixture(S sdf, S p_fg) const {
+    const S laplace = std::exp(-std::fabs(sdf) / sigma) / (S(2) * sigma);
+    return alpha * laplace * p_fg + (S(1) - alpha) * p_uniform;
+  }
 };
 
 /// The paper's mixture (eq. 7) on a TSDF volume, with the voxels' foreground
@@ -53,9 +60,7 @@ struct PaperLikelihood {
     // volume at the outlier level instead of zero.
     S sdf;
     if (!volume.sample(p, sdf)) sdf = volume.truncation;
-    const S p_fg = foreground.empty() ? S(1) : foreground.probability(p);
-    const S laplace = std::exp(-std::fabs(sdf) / params.sigma) / (S(2) * params.sigma);
-    return params.alpha * laplace * p_fg + (S(1) - params.alpha) * params.p_uniform;
+    return params.mixture(sdf, foreground.empty() ? S(1) : foreground.probability(p));
   }
 };
 

@@ -493,11 +493,10 @@ class System {
   }
 
   /// Eq. 5 for a pixel that one model explains perfectly (sdf 0, p_fg 1)
-  /// and another not at all (the outlier term only): the second's share.
+  /// and another not at all (p_fg 0: the outlier term only): the second's share.
   S unexplained_association() const {
-    const LikelihoodParams<S>& l = params_.likelihood;
-    const S outlier = (S(1) - l.alpha) * l.p_uniform;
-    return outlier / (l.alpha / (S(2) * l.sigma) + S(2) * outlier);
+    const S explained = params_.likelihood.mixture(S(0), S(1)), unexplained = params_.likelihood.mixture(S(0), S(0));
+    return unexplained / (explained + unexplained);
   }
 
   // ---- Mapping -----------------------------------------------------------
