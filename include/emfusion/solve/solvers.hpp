@@ -118,6 +118,29 @@ template <class S>
 bool unchanged(const SE3<S>& a, const SE3<S>& b) {
   return max_abs_diff(a.matrix(), b.matrix()) == S(0);
 }
+/// The solvers' pose, in double and in S: steps compose in double, the
+/// problem is linearised at the S copy.
+template <class S>
+struct SolverPose {
+  SE3<double> T;
+  SE3<S> T_s;
+
+  /// A start whose rotation is not quite orthonormal (products of float
+  /// poses) would pass its error on to the result: start at the nearest
+  /// rotation.
+  static SolverPose at(const SE3<S>& start) {
+    SolverPose p;
+    p.T = start.template cast<double>().orthonormalized();
+    p.T_s = p.T.template cast<S>();
+    return p;
+  }
+  /// exp(xi) * T into `next`; false if that leaves the pose unchanged in S.
+  bool step(const Vec6<double>& xi, SolverPose& next) const {
+    next.T = SE3<double>::exp(xi) * T;
+    next.T_s = next.T.template cast<S>();
+    return !unchanged(next.T_s, T_s);
+  }
+};
 /// Common start: linearise at T0 and check there is something to solve.
 inline bool start(const NormalEquations6& n, double min_terms, SolveReport& report) {
   report.initial_cost = report.final_cost = n.cost;
@@ -140,11 +163,8 @@ template <class S, class F>
 SE3<S> levenberg_marquardt(F&& linearize, const SE3<S>& start, const LevenbergMarquardtParams& p = {},
                            SolveReport* report_out = nullptr) {
   SolveReport report;
-  // A start whose rotation is not quite orthonormal (products of float poses)
-  // would pass its error on to the result: start at the nearest rotation.
-  SE3<double> T = start.template cast<double>().orthonormalized();
-  SE3<S> T_s = T.template cast<S>();
-  NormalEquations6 n = linearize(T_s, static_cast<const SE3<S>*>(nullptr));
+  auto pose = detail::SolverPose<S>::at(start);
+  NormalEquations6 n = linearize(pose.T_s, static_cast<const SE3<S>*>(nullptr));
   if (detail::start(n, p.min_terms, report)) {
     double mu = p.tau * detail::max_diagonal(n);
     double nu = p.nu;
@@ -159,17 +179,12 @@ SE3<S> levenberg_marquardt(F&& linearize, const SE3<S>& start, const LevenbergMa
         report.reason = StopReason::singular;
         break;
       }
-      if (norm(xi) <= detail::step_norm_limit(T, p.eps2)) {
+      detail::SolverPose<S> next;
+      if (norm(xi) <= detail::step_norm_limit(pose.T, p.eps2) || !pose.step(xi, next)) {
         report.reason = StopReason::step_small;
         break;
       }
-      const SE3<double> T_new = SE3<double>::exp(xi) * T;
-      const SE3<S> T_new_s = T_new.template cast<S>();
-      if (detail::unchanged(T_new_s, T_s)) {
-        report.reason = StopReason::step_small;
-        break;
-      }
-      const NormalEquations6 n_new = linearize(T_new_s, &T_s);
+      const NormalEquations6 n_new = linearize(next.T_s, &pose.T_s);
       ++report.iterations;
       // Predicted decrease of the quadratic model: xi^T (mu xi - g) / 2,
       // against the actual decrease over the terms valid at both poses.
@@ -180,7 +195,7 @@ SE3<S> levenberg_marquardt(F&& linearize, const SE3<S>& start, const LevenbergMa
                              ? (n_new.shared_reference_cost - n_new.shared_cost) / predicted
                              : -1.0;
       if (rho > 0) {
-        T = T_new, T_s = T_new_s;
+        pose = next;
         n = n_new;
         ++report.accepted_steps;
         const double a = 2 * rho - 1;
@@ -196,7 +211,7 @@ SE3<S> levenberg_marquardt(F&& linearize, const SE3<S>& start, const LevenbergMa
   report.final_cost = n.cost;
   report.terms = n.terms;
   if (report_out) *report_out = report;
-  return T_s;
+  return pose.T_s;
 }
 
 /// Plain Gauss-Newton: every step accepted; stops on a small step.
@@ -206,11 +221,8 @@ SE3<S> gauss_newton(F&& linearize, const SE3<S>& start, const GaussNewtonParams&
                     SolveReport* report_out = nullptr) {
   SolveReport report;
   const SE3<S>* no_reference = nullptr;
-  // A start whose rotation is not quite orthonormal (products of float poses)
-  // would pass its error on to the result: start at the nearest rotation.
-  SE3<double> T = start.template cast<double>().orthonormalized();
-  SE3<S> T_s = T.template cast<S>();
-  NormalEquations6 n = linearize(T_s, no_reference);
+  auto pose = detail::SolverPose<S>::at(start);
+  NormalEquations6 n = linearize(pose.T_s, no_reference);
   if (detail::start(n, p.min_terms, report)) {
     report.reason = StopReason::max_iterations;
     while (report.iterations < p.max_iterations) {
@@ -219,14 +231,13 @@ SE3<S> gauss_newton(F&& linearize, const SE3<S>& start, const GaussNewtonParams&
         report.reason = StopReason::singular;
         break;
       }
-      const SE3<double> T_new = SE3<double>::exp(xi) * T;
-      const SE3<S> T_new_s = T_new.template cast<S>();
-      if (detail::unchanged(T_new_s, T_s)) {
+      detail::SolverPose<S> next;
+      if (!pose.step(xi, next)) {
         report.reason = StopReason::step_small;
         break;
       }
-      T = T_new, T_s = T_new_s;
-      n = linearize(T_s, no_reference);
+      pose = next;
+      n = linearize(pose.T_s, no_reference);
       ++report.iterations, ++report.accepted_steps;
       if (!detail::finite(n)) {
         report.reason = StopReason::not_finite;
@@ -235,8 +246,8 @@ SE3<S> gauss_newton(F&& linearize, const SE3<S>& start, const GaussNewtonParams&
       // Undamped steps settle at the noise of the scalar's arithmetic rather
       // than at eps2 in float: stop there too.
       const double resolution = 10.0 * double(std::numeric_limits<S>::epsilon()) *
-                                (norm(T.log()) + 1.0);
-      if (norm(xi) <= std::max(detail::step_norm_limit(T, p.eps2), resolution)) {
+                                (norm(pose.T.log()) + 1.0);
+      if (norm(xi) <= std::max(detail::step_norm_limit(pose.T, p.eps2), resolution)) {
         report.reason = StopReason::step_small;
         break;
       }
@@ -245,7 +256,7 @@ SE3<S> gauss_newton(F&& linearize, const SE3<S>& start, const GaussNewtonParams&
   report.final_cost = n.cost;
   report.terms = n.terms;
   if (report_out) *report_out = report;
-  return T_s;
+  return pose.T_s;
 }
 
 }  // namespace emfusion
