@@ -263,3 +263,42 @@ TEMPLATE_LIST_TEST_CASE("Marching cubes of a fused sphere has the sphere's area 
   CHECK(std::fabs(area - true_area) < 0.03 * true_area);
   CHECK(std::fabs(enclosed - true_volume) < 0.03 * true_volume);
 }
+
+TEMPLATE_LIST_TEST_CASE("Sampling over the observed voxels renormalises and needs half the weight", "[volume]",
+                        emfusion::test::AllConfigs) {
+  using S = typename TestType::Scalar;
+  const S vs = S(0.01);
+  // A 4^3 grid whose SDF is 0.5 x (volume frame), every voxel observed.
+  std::vector<S> sdf(64), weight(64, S(1));
+  for (int z = 0; z < 4; ++z)
+    for (int y = 0; y < 4; ++y)
+      for (int x = 0; x < 4; ++x) sdf[std::size_t((z * 4 + y) * 4 + x)] = S(0.5) * (S(x) + S(0.5)) * vs;
+  const TsdfView<S, const S> view{sdf.data(), weight.data(), 4, 4, 4, vs, S(10) * vs};
+  const Vec3<S> p = Vec3<S>::constant(S(2) * vs);  // the centre of the middle cell: equal corner weights
+  S strict = 0, observed = 0;
+  REQUIRE(view.sample(p, strict));
+  REQUIRE(view.sample_observed(p, observed));
+  CHECK(double(observed) == Approx(double(strict)).epsilon(1e-6));
+  Vec3<S> g;
+  REQUIRE(view.observed_gradient(p, g));
+  CHECK(double(g.x()) == Approx(0.5).epsilon(1e-4));
+  CHECK(std::fabs(double(g.y())) < 1e-5);
+
+  // One corner of the cell unobserved: the strict sample fails, the other
+  // seven are averaged with their weights renormalised.
+  weight[std::size_t((2 * 4 + 2) * 4 + 2)] = S(0);
+  REQUIRE_FALSE(view.sample(p, strict));
+  REQUIRE(view.sample_observed(p, observed));
+  double expected = 0;
+  for (int k = 0; k < 8; ++k)
+    if (k != 7) expected += double(sdf[std::size_t(((1 + (k >> 2)) * 4 + 1 + ((k >> 1) & 1)) * 4 + 1 + (k & 1))]);
+  CHECK(double(observed) == Approx(expected / 7).epsilon(1e-5));
+  // The gradient still comes out (one-sided where needed) and along x.
+  REQUIRE(view.observed_gradient(p, g));
+  CHECK(double(g.x()) > 0.3);
+
+  // Five of the eight unobserved: less than half the weight, no sample.
+  for (int k : {0, 1, 2, 3})
+    weight[std::size_t(((1 + (k >> 2)) * 4 + 1 + ((k >> 1) & 1)) * 4 + 1 + (k & 1))] = S(0);
+  CHECK_FALSE(view.sample_observed(p, observed));
+}

@@ -136,27 +136,6 @@ struct RaycastPixel {
     miss(i);
   }
 
-  /// Central differences one voxel apart over the observed voxels (as the
-  /// marching samples), one-sided where one side is not observed.
-  EMF_HD bool observed_gradient(const Vec3<S>& p, Vec3<S>& g) const {
-    const S h = volume.voxel_size;
-    S centre = S(0);
-    const bool has_centre = volume.sample_observed(p, centre);
-    for (int a = 0; a < 3; ++a) {
-      Vec3<S> q = p;
-      S plus = S(0), minus = S(0);
-      q[a] = p[a] + h;
-      const bool has_plus = volume.sample_observed(q, plus);
-      q[a] = p[a] - h;
-      const bool has_minus = volume.sample_observed(q, minus);
-      if (has_plus && has_minus) g[a] = (plus - minus) / (S(2) * h);
-      else if (has_plus && has_centre) g[a] = (plus - centre) / h;
-      else if (has_minus && has_centre) g[a] = (centre - minus) / h;
-      else return false;
-    }
-    return true;
-  }
-
   /// Regula falsi on [ta, tb] with f(ta) > 0 >= f(tb).
   EMF_HD S refine(const Vec3<S>& o, const Vec3<S>& d, S ta, S fa, S tb, S fb) const {
     S t = ta + (tb - ta) * fa / (fa - fb);
@@ -177,7 +156,7 @@ struct RaycastPixel {
   EMF_HD void write_hit(int i, const Vec3<S>& ray_cam, S t, const Vec3<S>& p_volume) const {
     Vec3<S> g;
     const Vec3<S> vertex = t * ray_cam;
-    if (!observed_gradient(p_volume, g) || !(squared_norm(g) > S(0))) {
+    if (!volume.observed_gradient(p_volume, g) || !(squared_norm(g) > S(0))) {
       miss(i);
       return;
     }

@@ -98,6 +98,26 @@ struct TsdfView {
     return true;
   }
 
+  /// Central differences one voxel apart of `sample_observed`, one-sided
+  /// where one side is not observed: the normals of what rendering draws.
+  EMF_HD bool observed_gradient(const Vec3<S>& p, Vec3<S>& gradient) const {
+    S centre = S(0);
+    const bool has_centre = sample_observed(p, centre);
+    for (int a = 0; a < 3; ++a) {
+      Vec3<S> q = p;
+      S plus = S(0), minus = S(0);
+      q[a] = p[a] + voxel_size;
+      const bool has_plus = sample_observed(q, plus);
+      q[a] = p[a] - voxel_size;
+      const bool has_minus = sample_observed(q, minus);
+      if (has_plus && has_minus) gradient[a] = (plus - minus) / (S(2) * voxel_size);
+      else if (has_plus && has_centre) gradient[a] = (plus - centre) / voxel_size;
+      else if (has_minus && has_centre) gradient[a] = (centre - minus) / voxel_size;
+      else return false;
+    }
+    return true;
+  }
+
   /// Trilinear SDF and its exact gradient (of the trilinear interpolant) at p.
   EMF_HD bool sample_with_gradient(const Vec3<S>& p, S& sdf_out, Vec3<S>& gradient, S* weight_out = nullptr) const {
     Corner c;
