@@ -14,6 +14,7 @@
 #include <algorithm>
 #include <cmath>
 #include <map>
+#include <memory>
 #include <optional>
 #include <string>
 #include <vector>
@@ -56,6 +57,19 @@ std::unique_ptr<System<float, B>> run(const sim::DynamicScene<float>& scene, con
     system->process(depth.template to<B>(), scene.timestamp(f), det ? &*det : nullptr);
   }
   return system;
+}
+
+const sim::DynamicScene<float>& scene_small() {
+  static const sim::DynamicScene<float> scene = sim::make_dynamic_room<float>(room_small());
+  return scene;
+}
+
+/// The full method's run on a backend, made once and shared by the tests
+/// below (each run is about 100 s on two CPU cores).
+template <class B>
+const System<float, B>& full_run() {
+  static const std::unique_ptr<System<float, B>> system = run<B>(scene_small(), small_system());
+  return *system;
 }
 
 template <class B>
@@ -111,7 +125,7 @@ double background_trace(const sim::DynamicScene<float>& scene, const System<floa
 }  // namespace
 
 TEST_CASE("Three moving objects: created, tracked within 1 cm, camera within 1 cm", "[slam][integration]") {
-  const auto scene = sim::make_dynamic_room<float>(room_small());
+  const auto& scene = scene_small();
   const auto check = [&](const auto& system) {
     const auto cam = eval::absolute_trajectory_error(system.camera_trajectory(), scene.camera_trajectory());
     INFO("camera ATE " << cam.rmse);
@@ -125,20 +139,20 @@ TEST_CASE("Three moving objects: created, tracked within 1 cm, camera within 1 c
       CHECK(o.result.coverage >= 0.8);
     }
   };
-  SECTION("host") { check(*run<Host>(scene, small_system())); }
+  SECTION("host") { check(full_run<Host>()); }
 #if EMFUSION_HAS_CUDA
-  SECTION("cuda") { check(*run<Cuda>(scene, small_system())); }
+  SECTION("cuda") { check(full_run<Cuda>()); }
 #endif
 }
 
 TEST_CASE("Without association, moving objects leave a trace in the background", "[slam][integration]") {
-  const auto scene = sim::make_dynamic_room<float>(room_small());
+  const auto& scene = scene_small();
 #if EMFUSION_HAS_CUDA
   using B = Cuda;
 #else
   using B = Host;
 #endif
-  const double full = background_trace(scene, *run<B>(scene, small_system()));
+  const double full = background_trace(scene, full_run<B>());
   SystemParams<float> ablation = small_system();
   ablation.use_association = false;
   const double without = background_trace(scene, *run<B>(scene, ablation));
