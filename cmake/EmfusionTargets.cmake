@@ -23,3 +23,13 @@ function(emfusion_add_executable name)
   add_executable(${name} ${ARGN})
   emfusion_use_project_settings(${name})
 endfunction()
+
+# A ctest entry that runs `target` with the arguments after EXPECT and passes
+# only if it exits non-zero with output matching the regular expression
+# `expect` (tests/support/expect_failure.cmake): bad input is refused with
+# the message a user needs.
+function(emfusion_add_failure_test name target expect)
+  list(JOIN ARGN ";" args)
+  add_test(NAME ${name} COMMAND ${CMAKE_COMMAND} "-DCOMMAND=$<TARGET_FILE:${target}>;${args}" "-DEXPECT=${expect}"
+           -P ${PROJECT_SOURCE_DIR}/tests/support/expect_failure.cmake)
+endfunction()

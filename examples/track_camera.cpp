@@ -120,7 +120,7 @@ Options parse(int argc, char** argv) {
     else if (a == "--voxel-size") o.voxel_size = examples::parse_positive_double(a, v);
     else if (a == "--tau") o.tau = examples::parse_positive_double(a, v);
     else if (a == "--behind-band") o.behind_band = examples::parse_positive_double(a, v);
-    else if (a == "--bilateral-radius") o.bilateral_radius = v == "0" ? 0 : examples::parse_positive_int(a, v, 16);
+    else if (a == "--bilateral-radius") o.bilateral_radius = examples::parse_int(a, v, 0, 16);
     else if (a == "--silhouette-guard") o.silhouette_guard = examples::parse_positive_double(a, v);
     else if (a == "--integration") {
       if (v != "paper" && v != "refined") throw std::invalid_argument("--integration must be paper or refined");

@@ -9,15 +9,20 @@
 
 namespace emfusion::examples {
 
-/// The value of `flag` as an integer in [1, max]; throws std::invalid_argument
+/// The value of `flag` as an integer in [min, max]; throws std::invalid_argument
 /// naming the flag otherwise.
-inline int parse_positive_int(const std::string& flag, const std::string& value, long max = 100000) {
+inline int parse_int(const std::string& flag, const std::string& value, long min, long max) {
   char* end = nullptr;
   const long v = std::strtol(value.c_str(), &end, 10);
-  if (value.empty() || *end != '\0' || v <= 0 || v > max)
-    throw std::invalid_argument(flag + " expects an integer from 1 to " + std::to_string(max) + ", got '" + value +
-                                "'");
+  if (value.empty() || *end != '\0' || v < min || v > max)
+    throw std::invalid_argument(flag + " expects an integer from " + std::to_string(min) + " to " +
+                                std::to_string(max) + ", got '" + value + "'");
   return int(v);
+}
+
+/// The value of `flag` as an integer in [1, max].
+inline int parse_positive_int(const std::string& flag, const std::string& value, long max = 100000) {
+  return parse_int(flag, value, 1, max);
 }
 
 /// The value of `flag` as a finite positive number; throws naming the flag.
