@@ -278,10 +278,10 @@ TEMPLATE_LIST_TEST_CASE("Sampling over the observed voxels renormalises and need
   S strict = 0, observed = 0;
   REQUIRE(view.sample(p, strict));
   REQUIRE(view.sample_observed(p, observed));
-  CHECK(double(observed) == Approx(double(strict)).epsilon(1e-6));
+  CHECK(double(observed) == emfusion::test::Approx(double(strict)).epsilon(1e-6));
   Vec3<S> g;
   REQUIRE(view.observed_gradient(p, g));
-  CHECK(double(g.x()) == Approx(0.5).epsilon(1e-4));
+  CHECK(double(g.x()) == emfusion::test::Approx(0.5).epsilon(1e-4));
   CHECK(std::fabs(double(g.y())) < 1e-5);
 
   // One corner of the cell unobserved: the strict sample fails, the other
@@ -292,7 +292,7 @@ TEMPLATE_LIST_TEST_CASE("Sampling over the observed voxels renormalises and need
   double expected = 0;
   for (int k = 0; k < 8; ++k)
     if (k != 7) expected += double(sdf[std::size_t(((1 + (k >> 2)) * 4 + 1 + ((k >> 1) & 1)) * 4 + 1 + (k & 1))]);
-  CHECK(double(observed) == Approx(expected / 7).epsilon(1e-5));
+  CHECK(double(observed) == emfusion::test::Approx(expected / 7).epsilon(1e-5));
   // The gradient still comes out (one-sided where needed) and along x.
   REQUIRE(view.observed_gradient(p, g));
   CHECK(double(g.x()) > 0.3);
