@@ -7,7 +7,7 @@
 //   track_camera <sequence-dir> <trajectory.txt> [--backend cpu|cuda]
 //                [--max-frames N] [--voxels N] [--voxel-size M] [--stride N] [--tau T]
 //                [--integration paper|refined] [--behind-band F] [--silhouette-guard G] [--bilateral-radius R] [--silhouette-guard VOXELS]
-//                [--central-gradient]
+//                [--central-gradient] [--depth-weight Z]
 //                [--verbose]
 #include <chrono>
 #include <cstdio>
@@ -37,6 +37,7 @@ struct Options {
   double behind_band = -1;
   double silhouette_guard = -1;
   int bilateral_radius = -1;  // -1: the filter's default
+  double depth_weight = 0;    // SdfAlignmentParams::depth_noise_reference; 0 = off
 };
 
 template <class B>
@@ -56,6 +57,7 @@ void track(const Options& o) {
   SdfAlignmentParams<S> align;
   align.pixel_stride = o.stride;
   align.central_gradient = o.central_gradient;
+  align.depth_noise_reference = S(o.depth_weight);
   LevenbergMarquardtParams lm;
   lm.tau = o.tau;
   IntegrationParams<S> fusion = o.integration == "refined" ? IntegrationParams<S>::refined() : IntegrationParams<S>{};
@@ -122,6 +124,7 @@ Options parse(int argc, char** argv) {
     else if (a == "--behind-band") o.behind_band = examples::parse_positive_double(a, v);
     else if (a == "--bilateral-radius") o.bilateral_radius = examples::parse_int(a, v, 0, 16);
     else if (a == "--silhouette-guard") o.silhouette_guard = examples::parse_positive_double(a, v);
+    else if (a == "--depth-weight") o.depth_weight = examples::parse_positive_double(a, v);
     else if (a == "--integration") {
       if (v != "paper" && v != "refined") throw std::invalid_argument("--integration must be paper or refined");
       o.integration = v;
@@ -130,7 +133,7 @@ Options parse(int argc, char** argv) {
   }
   if (positional.size() != 2)
     throw std::invalid_argument("usage: track_camera <sequence-dir> <trajectory.txt> [--backend cpu|cuda] "
-                                "[--max-frames N] [--voxels N] [--voxel-size M] [--stride N] [--tau T] [--integration paper|refined] [--behind-band F] [--silhouette-guard G] [--bilateral-radius R] [--central-gradient] [--verbose]");
+                                "[--max-frames N] [--voxels N] [--voxel-size M] [--stride N] [--tau T] [--integration paper|refined] [--behind-band F] [--silhouette-guard G] [--bilateral-radius R] [--depth-weight Z] [--central-gradient] [--verbose]");
   o.sequence = positional[0], o.output = positional[1];
   return o;
 }

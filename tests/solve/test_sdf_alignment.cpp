@@ -1,6 +1,7 @@
 // SDF alignment (paper eq. 8/9) with Levenberg-Marquardt: recovery of known
 // camera offsets in a fused synthetic room, robustness to 30 % corrupted
-// points, and a single plane that must not make the solver diverge.
+// points, a single plane that must not make the solver diverge, and the
+// optional depth-noise weighting of the terms.
 #include <cmath>
 #include <random>
 #include <vector>
@@ -11,6 +12,7 @@
 #include "support/room.hpp"
 
 using namespace emfusion;
+using emfusion::test::Approx;
 
 namespace {
 
@@ -107,6 +109,43 @@ TEMPLATE_LIST_TEST_CASE("Huber and Tukey alignment resist 30% corrupted points",
   CHECK(tukey_near < 2e-3);
   CHECK(huber < 1e-2);
   CHECK(huber_near < 2e-2);
+}
+
+TEST_CASE("Depth-noise weighting scales each term by (sigma(reference) / sigma(z))^2, at most 1", "[solve]") {
+  using S = double;
+  const auto volume = test::fused_room<S, Host>();
+  const SE3<S> pose = SE3<S>::exp(Vec6<S>{{S(0.03), S(-0.02), S(0.04), S(0.02), S(-0.03), S(0.01)}});
+  const auto points = test::room_points<S, Host>(pose);
+  SdfAlignmentParams<S> plain, weighted;
+  weighted.depth_noise_reference = S(1.5);
+  const auto a = make_sdf_alignment(volume, points, static_cast<const Image<S, Host>*>(nullptr), plain);
+  const auto b = make_sdf_alignment(volume, points, static_cast<const Image<S, Host>*>(nullptr), weighted);
+  const SE3<S> T = volume.pose().inverse() * pose;
+  const auto p = points.to_host();
+  int near = 0, far = 0;
+  for (int i = 0; i < a.term_count(); ++i) {
+    S ra, rb, wa, wb;
+    Vec6<S> Ja, Jb;
+    const bool ok = a.term(i, T, ra, Ja, wa);
+    REQUIRE(ok == b.term(i, T, rb, Jb, wb));
+    if (!ok) continue;
+    CHECK(rb == ra);
+    const S z = p[std::size_t(i)].z();
+    const S ratio = kinect_depth_sigma(S(1.5)) / kinect_depth_sigma(z);
+    CHECK(wb == Approx(wa * std::min(S(1), ratio * ratio)));
+    (z > S(1.5) ? far : near) += 1;
+  }
+  CHECK(near > 100);  // both sides of the reference were seen
+  CHECK(far > 100);
+  CHECK(kinect_depth_sigma(S(3)) == Approx(0.0012 + 0.0019 * 2.6 * 2.6));
+  // Weighted, the solver still recovers the pose.
+  const SE3<S> start = SE3<S>::exp(offsets<S>()[2]) * pose;
+  SolveReport report;
+  const SE3<S> found = align_to_volume(volume, points, static_cast<const Image<S, Host>*>(nullptr), start,
+                                       HuberNorm<S>{S(2) * volume.voxel_size()}, weighted,
+                                       LevenbergMarquardtParams{}, &report);
+  CHECK(pose_error(found, pose).translation < 1e-3);
+  CHECK(pose_error(found, pose).rotation < 0.1);
 }
 
 TEMPLATE_LIST_TEST_CASE("Alignment to a single plane does not diverge", "[solve]", emfusion::test::AllConfigs) {

@@ -32,7 +32,20 @@ struct SdfAlignmentParams {
   /// (smoother across voxel cells, six more samples per pixel) instead of the
   /// exact gradient of the trilinear interpolant.
   bool central_gradient = false;
+  /// Depth-noise weighting: 0 = off; otherwise a term at depth z (metres)
+  /// weighs min(1, (sigma(reference) / sigma(z))^2), with the Kinect
+  /// axial noise model sigma(z) = 0.0012 + 0.0019 (z - 0.4)^2 m (Nguyen et
+  /// al. 2012), so that far, noisy points count less.
+  S depth_noise_reference = S(0);
 };
+
+/// Axial depth noise of a structured-light sensor at depth z (metres): the
+/// model of Nguyen, Izadi and Lovell (3DIMPVT 2012) for the Kinect v1.
+template <class S>
+EMF_HD inline S kinect_depth_sigma(S z) {
+  const S d = z - S(0.4);
+  return S(0.0012) + S(0.0019) * d * d;
+}
 
 /// The per-pixel terms of SDF alignment (a PoseTerms problem over
 /// T_volume_camera). Holds views: valid while the volume and images live.
@@ -44,6 +57,7 @@ struct SdfAlignmentTerms {
   S confidence_scale = S(0);        ///< 1 / W_norm; 0 = map confidence off
   int stride = 1;
   bool central_gradient = false;
+  S noise_reference_sigma = S(0);   ///< sigma at the reference depth; 0 = no depth weighting
 
   EMF_HD int term_count() const {
     return ((points.width + stride - 1) / stride) * ((points.height + stride - 1) / stride);
@@ -62,6 +76,10 @@ struct SdfAlignmentTerms {
     if (!volume.sample_with_gradient(x, r, g, &W)) return false;
     if (central_gradient && !volume.central_gradient(x, g)) return false;
     if (confidence_scale > S(0)) q *= (W * confidence_scale < S(1) ? W * confidence_scale : S(1));
+    if (noise_reference_sigma > S(0)) {
+      const S ratio = noise_reference_sigma / kinect_depth_sigma(p.z());
+      q *= ratio < S(1) ? ratio * ratio : S(1);
+    }
     const Vec3<S> xg = cross(x, g);
     J = Vec6<S>{{g.x(), g.y(), g.z(), xg.x(), xg.y(), xg.z()}};
     w = q;
@@ -89,6 +107,7 @@ SdfAlignmentTerms<S, Store> make_sdf_alignment(const TsdfVolume<S, B, Store>& vo
   t.confidence_scale = params.use_map_confidence ? S(1) / params.confidence_normalizer : S(0);
   t.stride = params.pixel_stride;
   t.central_gradient = params.central_gradient;
+  if (params.depth_noise_reference > S(0)) t.noise_reference_sigma = kinect_depth_sigma(params.depth_noise_reference);
   return t;
 }
 
