@@ -1,5 +1,5 @@
-// Detection handling rules: mask IoU, matching with conflicts, percentile
-// boxes, volumetric IoU, static classes.
+// Detection handling rules: mask IoU, matching with conflicts, depth groups
+// and percentile boxes, volumetric IoU, static classes.
 #include <cmath>
 #include <cstdint>
 #include <vector>
@@ -84,6 +84,30 @@ TEST_CASE("Percentile boxes ignore the outer 10 percent and pad into cubes", "[d
   const Box<double> cube = padded_cube(box, 2.0);
   CHECK(cube.hi.x() - cube.lo.x() == Approx(2.0 * box.largest_side()));
   CHECK(cube.center().y() == Approx(box.center().y()));
+}
+
+TEST_CASE("A mask's spill onto the surface behind is split off by depth", "[detect]") {
+  // An object 1.30-1.45 m away seen by 700 pixels; the mask spills onto a
+  // wall at 3 m with 300 more (30 %, enough to move the 90th percentile).
+  std::vector<Vec3<double>> pts;
+  for (int i = 0; i < 700; ++i) pts.push_back(vec3(0.001 * (i % 100), 0.001 * (i / 100), 1.3 + 0.15 * i / 699.0));
+  for (int i = 0; i < 300; ++i) pts.push_back(vec3(0.002 * i, 0.1, 3.0 + 0.0005 * i));
+  CHECK(percentile_box(pts).hi.z() > 2.9);  // what the percentiles alone would do
+  const std::vector<Vec3<double>> object = largest_depth_group(pts, 0.1);
+  REQUIRE(object.size() == 700);
+  const Box<double> box = percentile_box(object);
+  CHECK(box.hi.z() < 1.45);
+  CHECK(box.lo.z() > 1.3);
+  // A surface with no gap stays whole, however deep it is.
+  std::vector<Vec3<double>> slanted;
+  for (int i = 0; i < 500; ++i) slanted.push_back(vec3(0.0, 0.0, 1.0 + 0.004 * i));
+  CHECK(largest_depth_group(slanted, 0.1).size() == 500);
+  // Two equal groups: the nearer one. Fewer than two points: unchanged.
+  const std::vector<Vec3<double>> pair = {vec3(0.0, 0.0, 2.0), vec3(0.0, 0.0, 1.0)};
+  const auto nearer = largest_depth_group(pair, 0.1);
+  REQUIRE(nearer.size() == 1);
+  CHECK(nearer[0].z() == 1.0);
+  CHECK(largest_depth_group(std::vector<Vec3<double>>{}, 0.1).empty());
 }
 
 TEST_CASE("Volumetric IoU of boxes", "[detect]") {

@@ -29,6 +29,9 @@ struct SystemParams {
   // Objects.
   int object_voxels = 64;        ///< initial resolution of a new object
   S object_padding = S(2);       ///< volume side / largest extent of the 10-90 % box
+  /// A detection's points split into groups at depth gaps wider than this;
+  /// only the largest group sizes a new or growing volume (largest_depth_group).
+  S object_depth_gap = S(0.1);
   int max_object_voxels = 256;   ///< resizing stops growing a volume beyond this per axis
   int max_objects = 16;          ///< live objects; detections beyond it create none (bounds memory)
 
@@ -36,6 +39,8 @@ struct SystemParams {
   S huber_voxels = S(2);         ///< Huber delta in voxels of the tracked volume
   LevenbergMarquardtParams lm{};
   int pixel_stride = 1;          ///< use every n-th pixel in x and y when tracking
+  /// Depth-noise weighting of tracking terms (SdfAlignmentParams): 0 = off.
+  S depth_noise_reference = S(0);
   /// An object whose alignment has fewer terms keeps its previous pose.
   int min_object_terms = 100;
 
@@ -89,9 +94,11 @@ struct SystemParams {
                     "object_voxels must be at least 8 and at most max_object_voxels");
     detail::require(max_object_voxels <= 1024, w, "max_object_voxels must be at most 1024");
     detail::require(object_padding >= S(1), w, "object_padding must be at least 1");
+    detail::require(object_depth_gap > S(0), w, "object_depth_gap must be positive");
     detail::require(max_objects >= 0 && max_objects <= 256, w, "max_objects must be in 0..256");
     detail::require(huber_voxels > S(0), w, "huber_voxels must be positive");
     detail::require(pixel_stride >= 1, w, "pixel_stride must be at least 1");
+    detail::require(depth_noise_reference >= S(0), w, "depth_noise_reference must not be negative");
     detail::require(likelihood.sigma > S(0) && likelihood.alpha >= S(0) && likelihood.alpha <= S(1) &&
                         likelihood.p_uniform >= S(0),
                     w, "likelihood needs sigma > 0, alpha in [0, 1], p_uniform >= 0");

@@ -79,6 +79,16 @@ struct ObjectRecord {
   Trajectory trajectory;   ///< T_world_object per frame it existed
 };
 
+/// What the deletion rules saw of one object in a frame.
+struct ObjectStatus {
+  int id = 0;
+  int rendered_pixels = 0;        ///< rendered pixels inside the visibility border
+  int associated_pixels = 0;      ///< pixels inside the border whose association to it exceeds 0.5
+  int visible_pixels = 0;         ///< the larger of the two: what the visibility rule compares
+  double mean_association = 1.0;  ///< mean association over its rendered pixels (1 when not computed)
+  DeletionReason deleted = DeletionReason::none;
+};
+
 /// What happened in one frame.
 struct FrameResult {
   int frame = 0;
@@ -88,6 +98,7 @@ struct FrameResult {
   bool detector_frame = false;
   int detections = 0, matched = 0;
   std::vector<int> created, deleted;    ///< object ids
+  std::vector<ObjectStatus> object_status;  ///< objects that existed before this frame, in objects() order
   int live_objects = 0;
   StageTimes times;
 };
@@ -146,6 +157,41 @@ struct ResolveBackground {
   }
 };
 
+/// What the deletion rules count of one object over the image: its
+/// rendered pixels, the association summed over them, and the pixels inside
+/// the visibility border that it renders or that the E-step gives it (q > 0.5).
+struct ObjectPixels {
+  double association_sum = 0;
+  int rendered = 0, rendered_inner = 0, associated_inner = 0;
+  EMF_HD ObjectPixels operator+(const ObjectPixels& o) const {
+    return {association_sum + o.association_sum, rendered + o.rendered, rendered_inner + o.rendered_inner,
+            associated_inner + o.associated_inner};
+  }
+};
+
+template <class S>
+struct CountObjectPixels {
+  ImageView<const int> label;
+  ImageView<const S> association;  // empty: not computed this frame
+  int model, border;
+  EMF_HD ObjectPixels operator()(int i) const {
+    const int u = i % label.width, v = i / label.width;
+    const bool inner = u >= border && v >= border && u < label.width - border && v < label.height - border;
+    const bool drawn = label[i] == model;
+    const S q = association.empty() ? S(0) : association[i];
+    ObjectPixels p;
+    p.association_sum = drawn ? double(q) : 0.0;
+    p.rendered = drawn ? 1 : 0;
+    p.rendered_inner = drawn && inner ? 1 : 0;
+    p.associated_inner = inner && q > S(0.5) ? 1 : 0;
+    return p;
+  }
+};
+
+struct AddObjectPixels {
+  EMF_HD ObjectPixels operator()(const ObjectPixels& a, const ObjectPixels& b) const { return a + b; }
+};
+
 }  // namespace detail::system
 
 template <class S, Backend B = Host>
@@ -174,10 +220,10 @@ class System {
 
     if (frame_ > 0) track(result, clock);
     render_models();
-    // Detection handling and the deletion rules read the segmentation on
-    // the host; it does not change for the rest of the frame.
-    const std::vector<int> seg = segmentation_.to_host();
     result.times.raycast = clock.lap();
+    // Detection handling reads the segmentation on the host (detector
+    // frames only); it does not change for the rest of the frame.
+    const std::vector<int> seg = detections ? segmentation_.to_host() : std::vector<int>{};
 
     // Mapping weights of new objects: their detection masks.
     std::vector<NewObjectWeights> fresh;
@@ -190,7 +236,7 @@ class System {
     if (detections) update_foreground_counts(depth, *detections, seg, matched_object_of_detection, fresh);
     result.times.foreground = clock.lap();
 
-    delete_objects(seg, result, detections != nullptr, int(fresh.size()));
+    delete_objects(result, detections != nullptr, int(fresh.size()));
     record(timestamp);
     result.live_objects = int(objects_.size());
     result.times.total = clock.total();
@@ -298,6 +344,7 @@ class System {
     a.use_map_confidence = params_.use_map_confidence;
     a.confidence_normalizer = params_.background_integration.max_weight;
     a.pixel_stride = params_.pixel_stride;
+    a.depth_noise_reference = params_.depth_noise_reference;
     return a;
   }
 
@@ -412,9 +459,10 @@ class System {
     }
   }
 
-  /// Volume-frame points of a detection's pixels.
+  /// Camera-frame points of a detection's pixels (without those of pixels
+  /// another object covers, when `seg` is given).
   std::vector<Vec3<S>> detection_points(const std::vector<Vec3<S>>& points, const std::uint16_t* labels, int label,
-                                        const SE3<S>& T_frame_camera, const std::vector<int>* seg = nullptr,
+                                        const std::vector<int>* seg = nullptr,
                                         int* covered = nullptr, int* total = nullptr) const {
     std::vector<Vec3<S>> out;
     for (std::size_t i = 0; i < points.size(); ++i) {
@@ -424,15 +472,17 @@ class System {
         if (covered) ++*covered;
         continue;
       }
-      if (is_valid(points[i])) out.push_back(T_frame_camera * points[i]);
+      if (is_valid(points[i])) out.push_back(points[i]);
     }
     return out;
   }
 
   void grow_for_detection(Object& obj, const std::vector<Vec3<S>>& points, const std::uint16_t* labels, int label) {
     const SE3<S> T_volume_camera = obj.volume().pose().inverse() * T_world_camera_;
-    const std::vector<Vec3<S>> p = detection_points(points, labels, label, T_volume_camera);
+    std::vector<Vec3<S>> p =
+        largest_depth_group(detection_points(points, labels, label), params_.object_depth_gap);
     if (int(p.size()) < min_mask_pixels()) return;
+    for (Vec3<S>& x : p) x = T_volume_camera * x;
     const Box<S> box = percentile_box(p);
     // Grow to hold the detection's box with the same relative padding as a
     // new object would get around it, per axis.
@@ -449,8 +499,9 @@ class System {
     if (int(objects_.size()) >= params_.max_objects) return std::nullopt;
     int covered = 0, total = 0;
     const std::uint16_t* labels = det.labels.view().data;
-    const std::vector<Vec3<S>> p =
-        detection_points(points, labels, inst.label, SE3<S>::identity(), &seg, &covered, &total);
+    const std::vector<Vec3<S>> p = largest_depth_group(
+        detection_points(points, labels, inst.label, &seg, &covered, &total),
+        params_.object_depth_gap);
     if (total == 0 || double(covered) >= params_.max_covered_fraction * double(total)) return std::nullopt;
     if (int(p.size()) < min_mask_pixels()) return std::nullopt;
     const Box<S> cube = padded_cube(percentile_box(p), params_.object_padding);
@@ -540,26 +591,32 @@ class System {
 
   // ---- Deletion ----------------------------------------------------------
 
-  void delete_objects(const std::vector<int>& seg, FrameResult& result, bool detector_frame, int created) {
+  void delete_objects(FrameResult& result, bool detector_frame, int created) {
     const int old_objects = int(objects_.size()) - created;
     std::vector<DeletionReason> why(objects_.size(), DeletionReason::none);
-    const int w = camera_.width, h = camera_.height, border = visibility_border();
-    std::vector<int> inner(objects_.size(), 0);
-    for (int v = 0; v < h; ++v)
-      for (int u = 0; u < w; ++u) {
-        const int k = seg[std::size_t(v * w + u)] - 1;
-        if (k < 0 || k >= old_objects) continue;
-        if (u >= border && v >= border && u < w - border && v < h - border) ++inner[std::size_t(k)];
-      }
+    // Association images exist from an object's second frame on.
+    const bool associated = params_.use_association && frame_ > 0;
     for (int k = 0; k < old_objects; ++k) {
       const Object& o = *objects_[std::size_t(k)];
+      const detail::system::ObjectPixels px = object_pixels(k);
+      ObjectStatus status;
+      status.id = o.id();
+      status.rendered_pixels = px.rendered_inner;
+      status.associated_pixels = px.associated_inner;
+      // Visible where the model is drawn or where the frame's points belong
+      // to it: a model built from a few views renders a smaller mask than the
+      // object shows (about 20 % on the dynamic sequences), the E-step sees
+      // the measured object whole.
+      status.visible_pixels = std::max(px.rendered_inner, px.associated_inner);
+      if (!is_person(o) && associated) status.mean_association = px.rendered > 0 ? px.association_sum / px.rendered : 0.0;
       if (detector_frame && o.existence_probability() < params_.min_existence)
         why[std::size_t(k)] = DeletionReason::existence;
-      else if (!is_person(o) && inner[std::size_t(k)] < min_mask_pixels())
+      else if (!is_person(o) && status.visible_pixels < min_mask_pixels())
         why[std::size_t(k)] = DeletionReason::not_visible;
-      else if (!is_person(o) && params_.use_association && frame_ > 0 &&
-               mean_association(k, seg) < params_.min_association)
+      else if (status.mean_association < params_.min_association)
         why[std::size_t(k)] = DeletionReason::weak_association;
+      status.deleted = why[std::size_t(k)];
+      result.object_status.push_back(status);
     }
     std::vector<std::unique_ptr<Object>> keep;
     for (std::size_t k = 0; k < objects_.size(); ++k) {
@@ -575,15 +632,14 @@ class System {
     objects_ = std::move(keep);
   }
 
-  /// Mean association of object k over its rendered mask.
-  double mean_association(int k, const std::vector<int>& seg) const {
-    if (k + 1 >= associations_.model_count()) return 1.0;
-    const std::vector<S> q = associations_.image(k + 1).to_host();
-    double sum = 0;
-    int n = 0;
-    for (std::size_t i = 0; i < seg.size(); ++i)
-      if (seg[i] == k + 1) sum += double(q[i]), ++n;
-    return n > 0 ? sum / n : 0.0;
+  /// Object k's pixel counts (ObjectPixels), reduced on the backend.
+  detail::system::ObjectPixels object_pixels(int k) const {
+    const ImageView<const S> q =
+        k + 1 < associations_.model_count() ? associations_.image(k + 1).view() : ImageView<const S>{};
+    return transform_reduce_index(backend_, segmentation_.size(),
+                                  detail::system::CountObjectPixels<S>{segmentation_.view(), q, k + 1,
+                                                                       visibility_border()},
+                                  detail::system::ObjectPixels{}, detail::system::AddObjectPixels{});
   }
 
   ObjectRecord& record_of(int id) {
