@@ -1,0 +1,231 @@
+// bench_system: the whole EM-Fusion system, per frame and per stage, on a
+// synthetic dynamic scene (default: 640x480, 300 frames, a 512^3 background
+// of 1 cm, 3 moving objects, the simulated detector every 30 frames) or on a
+// TUM-layout sequence with its masks/ folder. Prints the median and 90th
+// percentile of every stage and of the frame, peak host memory (and GPU
+// memory on CUDA), and the camera and object ATE when there is ground truth;
+// --json writes the same numbers.
+//
+//   bench_system [--backend cpu|cuda] [--frames N] [--objects K] [--width W]
+//                [--voxels N] [--voxel-size M] [--sequence DIR] [--json FILE]
+//
+// The first frame (allocation, no tracking) is left out of the statistics.
+// The detector's own time is not part of the system's (it is precomputed,
+// as a real detector runs beside the system). On small CPUs set
+// OMP_WAIT_POLICY=passive (docs/benchmarks.md).
+#include <sys/resource.h>
+
+#include <algorithm>
+#include <cstdio>
+#include <filesystem>
+#include <map>
+#include <optional>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "emfusion/eval/ate.hpp"
+#include "emfusion/eval/object_matching.hpp"
+#include "emfusion/io/masks.hpp"
+#include "emfusion/io/run_outputs.hpp"
+#include "emfusion/io/tum.hpp"
+#include "emfusion/sim/detector.hpp"
+#include "emfusion/sim/dynamic_scene.hpp"
+#include "emfusion/slam/system.hpp"
+#include "support/args.hpp"
+
+using namespace emfusion;
+using S = float;
+
+namespace {
+
+struct Options {
+  std::string backend = "cpu", sequence, json;
+  int frames = 300, objects = 3, width = 640, voxels = 512;
+  double voxel_size = 0.01;
+};
+
+/// Frames, detections and ground truth, all read before timing starts.
+struct Workload {
+  PinholeCamera<double> camera;
+  std::vector<double> timestamps;
+  std::vector<Image<float, Host>> depth;
+  std::vector<std::optional<Detections>> detections;
+  std::optional<Trajectory> camera_truth;
+  std::map<std::string, Trajectory> object_truth;
+};
+
+Workload load(const Options& o) {
+  Workload w;
+  if (!o.sequence.empty()) {
+    const TumSequence seq = TumSequence::open(o.sequence);
+    const std::size_t n = std::min<std::size_t>(seq.size(), std::size_t(o.frames));
+    w.camera = seq.camera();
+    std::optional<MaskDirectory> masks;
+    const std::string dir = (std::filesystem::path(o.sequence) / "masks").string();
+    if (std::filesystem::exists(std::filesystem::path(dir) / "masks.txt"))
+      masks = MaskDirectory::open(dir, w.camera.width, w.camera.height);
+    for (std::size_t i = 0; i < n; ++i) {
+      w.timestamps.push_back(seq.timestamp(i));
+      w.depth.push_back(seq.depth(i));
+      w.detections.push_back(masks ? masks->detect(int(i), seq.timestamp(i)) : std::nullopt);
+    }
+    w.camera_truth = seq.ground_truth();
+    for (auto& [name, traj] : seq.ground_truth_objects()) w.object_truth[name] = traj;
+    return w;
+  }
+  sim::DynamicSceneParams p;
+  p.frames = o.frames;
+  p.width = o.width;
+  p.height = o.width * 3 / 4;
+  p.moving_objects = o.objects;
+  const sim::SyntheticSequence seq(p);
+  sim::SimulatedDetectorParams dp;
+  dp.min_area = std::max(1, int(dp.min_area * double(p.width) * p.height / (640.0 * 480.0)));
+  sim::SimulatedDetector<float> detector(seq.scene(), dp);
+  w.camera = seq.camera();
+  for (std::size_t i = 0; i < seq.size(); ++i) {
+    w.timestamps.push_back(seq.timestamp(i));
+    w.depth.push_back(seq.depth(i));
+    w.detections.push_back(detector.detect(int(i), seq.timestamp(i)));
+  }
+  w.camera_truth = seq.scene().camera_trajectory();
+  for (int k = 0; k < seq.scene().object_count(); ++k)
+    w.object_truth[seq.scene().object_name(k)] = seq.scene().object_trajectory(k);
+  return w;
+}
+
+struct Stats {
+  double median = 0, p90 = 0;
+};
+
+Stats stats(std::vector<double> v) {
+  if (v.empty()) return {};
+  std::sort(v.begin(), v.end());
+  return {v[v.size() / 2], v[std::min(v.size() - 1, (v.size() * 9) / 10)]};
+}
+
+double peak_host_mib() {
+  rusage u{};
+  getrusage(RUSAGE_SELF, &u);
+  return double(u.ru_maxrss) / 1024.0;  // KiB on Linux
+}
+
+/// Device memory in use now (MiB); 0 on the host backend.
+template <class B>
+double device_used_mib() {
+#if EMFUSION_HAS_CUDA
+  if constexpr (std::is_same_v<B, Cuda>) {
+    std::size_t free = 0, total = 0;
+    cudaMemGetInfo(&free, &total);
+    return double(total - free) / (1024.0 * 1024.0);
+  }
+#endif
+  return 0;
+}
+
+template <class B>
+void run(const Options& o) {
+  const Workload w = load(o);
+  SystemParams<S> params;
+  params.background_voxels = o.voxels;
+  params.background_voxel_size = S(o.voxel_size);
+  const B backend{};
+  const double device_before = device_used_mib<B>();
+  double device_peak = device_before;
+  System<S, B> system(w.camera.cast<S>(), params, backend);
+  std::vector<StageTimes> times;
+  int max_objects = 0;
+  for (std::size_t i = 0; i < w.depth.size(); ++i) {
+    const Image<S, B> depth = w.depth[i].template to<B>(backend);
+    const FrameResult r = system.process(depth, w.timestamps[i], w.detections[i] ? &*w.detections[i] : nullptr);
+    if (i > 0) times.push_back(r.times);
+    max_objects = std::max(max_objects, r.live_objects);
+    device_peak = std::max(device_peak, device_used_mib<B>());
+  }
+
+  JsonWriter json;
+  json.begin().string("backend", B::name).string("input", o.sequence.empty() ? "synthetic" : o.sequence);
+  json.integer("frames", (long long)w.depth.size()).integer("width", w.camera.width).integer("height", w.camera.height);
+  json.integer("background_voxels", o.voxels).number("background_voxel_size_m", o.voxel_size);
+  json.integer("max_live_objects", max_objects);
+  std::printf("%s, %zu frames of %dx%d, background %d^3 x %.3g m, up to %d live objects\n", B::name, w.depth.size(),
+              w.camera.width, w.camera.height, o.voxels, o.voxel_size, max_objects);
+  std::printf("%-18s %10s %10s\n", "stage (ms)", "median", "p90");
+  json.begin("timings_ms");
+  const std::pair<const char*, double StageTimes::*> stages[] = {
+      {"preprocess", &StageTimes::preprocess},   {"e_step", &StageTimes::e_step},
+      {"track_background", &StageTimes::track_background}, {"track_objects", &StageTimes::track_objects},
+      {"raycast", &StageTimes::raycast},         {"detections", &StageTimes::detections},
+      {"integrate", &StageTimes::integrate},     {"foreground", &StageTimes::foreground},
+      {"total", &StageTimes::total}};
+  for (const auto& [name, field] : stages) {
+    std::vector<double> v;
+    for (const StageTimes& t : times) v.push_back(t.*field);
+    const Stats s = stats(v);
+    std::printf("%-18s %10.2f %10.2f\n", name, s.median, s.p90);
+    json.begin(name).number("median", s.median).number("p90", s.p90).end();
+  }
+  json.end();
+  const double host = peak_host_mib(), device = device_peak - device_before;
+  std::printf("peak host memory %.0f MiB; device memory used by the system %.0f MiB\n", host, device);
+  json.number("peak_host_mib", host).number("device_mib", device);
+  if (w.camera_truth && system.camera_trajectory().size() >= 3) {
+    const auto ate = eval::absolute_trajectory_error(system.camera_trajectory(), *w.camera_truth);
+    std::printf("camera ATE %.2f cm\n", 100 * ate.rmse);
+    json.number("camera_ate_m", ate.rmse);
+    std::map<int, Trajectory> estimates;
+    for (const ObjectRecord& r : system.object_records()) estimates[r.id] = r.trajectory;
+    json.begin("objects");
+    for (const auto& e : eval::evaluate_objects(system.camera_trajectory(), *w.camera_truth, estimates, w.object_truth)) {
+      if (e.evaluated)
+        std::printf("object %-14s ATE %.2f cm, coverage %.0f %%\n", e.name.c_str(), 100 * e.result.ate.rmse,
+                    100 * e.result.coverage);
+      else
+        std::printf("object %-14s not evaluated (%s)\n", e.name.c_str(), e.problem.c_str());
+      json.begin(e.name).boolean("evaluated", e.evaluated);
+      json.number("ate_rmse_m", e.evaluated ? e.result.ate.rmse : NAN);
+      json.number("coverage", e.evaluated ? e.result.coverage : 0.0).end();
+    }
+    json.end();
+  }
+  json.end();
+  if (!o.json.empty()) write_text_file(o.json, json.str());
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  try {
+    Options o;
+    for (int i = 1; i < argc; ++i) {
+      const std::string a = argv[i];
+      if (i + 1 >= argc) throw std::invalid_argument("option '" + a + "' needs a value (or is unknown)");
+      const std::string v = argv[++i];
+      if (a == "--backend") o.backend = v;
+      else if (a == "--frames") o.frames = examples::parse_positive_int(a, v);
+      else if (a == "--objects") o.objects = examples::parse_int(a, v, 1, 8);
+      else if (a == "--width") o.width = examples::parse_int(a, v, 64, 4096);
+      else if (a == "--voxels") o.voxels = examples::parse_int(a, v, 8, 2048);
+      else if (a == "--voxel-size") o.voxel_size = examples::parse_positive_double(a, v);
+      else if (a == "--sequence") o.sequence = v;
+      else if (a == "--json") o.json = v;
+      else throw std::invalid_argument("unknown option '" + a + "'");
+    }
+    if (o.backend == "cuda") {
+#if EMFUSION_HAS_CUDA
+      run<Cuda>(o);
+#else
+      throw std::invalid_argument("--backend 'cuda' is not available: this build has no CUDA");
+#endif
+    } else if (o.backend == "cpu") {
+      run<Host>(o);
+    } else {
+      throw std::invalid_argument("--backend must be cpu or cuda, got '" + o.backend + "'");
+    }
+    return 0;
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "bench_system: error: %s\n", e.what());
+    return 1;
+  }
+}
