@@ -2,24 +2,42 @@
 // scene, and the evaluation of its outputs (docs/user-guide.md).
 //
 //   emfusion run <input> --output <dir> [--masks <dir>] [--calibration <file>]
-//                [--intrinsics fr1|fr2|fr3|default|fx,fy,cx,cy] [--depth-scale S]
-//                [--backend cpu|cuda] [--config <file>] [--set key=value ...]
-//                [--max-frames N]
+//                [--intrinsics fr1|fr2|fr3|default|fx,fy,cx,cy[,width,height]]
+//                [--depth-scale S] [--backend cpu|cuda] [--config <file>]
+//                [--set key=value ...] [--max-frames N]
 //   emfusion eval <sequence> <output-dir>
 //
-// <input> is a TUM-layout sequence directory or synthetic:<scene> (room,
-// room-small, room1, room8; no data needed). With ground truth, `run`
-// ends by printing the camera and object errors.
+// <input> is, by what is on disk (docs/io.md, "Inputs of the emfusion app"):
+//   synthetic:<scene>   a built-in scene (room, room-small, room1, room8; no
+//                       data needed), with ground truth and a simulated detector;
+//   <file>.klg          an ElasticFusion/Co-Fusion log; camera from
+//                       --calibration, --intrinsics or the "default" preset,
+//                       depth value per metre from --depth-scale (default 1000);
+//   <dir>               a TUM-layout sequence when it has associations.txt or
+//                       depth.txt (depth scale default 5000, camera from
+//                       calibration.txt unless given; ground truth from
+//                       groundtruth.txt), else a Co-Fusion folder when it has
+//                       colour/ and depth/ folders (EXR depth in metres, so no
+//                       --depth-scale; camera from calibration.txt unless given).
+// --calibration and --intrinsics (only one of them) replace the camera of
+// every recorded input. Masks come from --masks, else <dir>/masks when it has
+// a masks.txt. With ground truth, `run` ends by printing the camera and
+// object errors.
 #include <unistd.h>
 
 #include <algorithm>
+#include <cctype>
 #include <chrono>
 #include <cstdio>
 #include <filesystem>
 #include <functional>
 #include <map>
+#include <memory>
 #include <optional>
+#include <stdexcept>
 #include <string>
+#include <system_error>
+#include <utility>
 #include <vector>
 
 #include <CLI/CLI.hpp>
@@ -27,7 +45,10 @@
 #include "emfusion/eval/ate.hpp"
 #include "emfusion/eval/object_matching.hpp"
 #include "emfusion/eval/rpe.hpp"
+#include "emfusion/io/cofusion.hpp"
 #include "emfusion/io/config.hpp"
+#include "emfusion/io/intrinsics.hpp"
+#include "emfusion/io/klg.hpp"
 #include "emfusion/io/masks.hpp"
 #include "emfusion/io/ply.hpp"
 #include "emfusion/io/run_outputs.hpp"
@@ -86,9 +107,81 @@ std::optional<sim::DynamicSceneParams> synthetic_params(const std::string& input
   throw std::invalid_argument("unknown synthetic scene '" + name + "' (room, room-small, room1, room8)");
 }
 
+/// The kinds of input `run` reads.
+enum class InputKind { Synthetic, Klg, CoFusion, Tum };
+
+constexpr const char* expected_inputs =
+    "expected synthetic:<scene>, a .klg file, a Co-Fusion folder (colour/ and depth/ folders) or a TUM-layout "
+    "sequence directory (associations.txt or depth.txt)";
+
+[[noreturn]] void bad_input(const std::string& input, const std::string& problem) {
+  throw std::runtime_error("'" + input + "': " + problem + " (" + expected_inputs + ")");
+}
+
+/// The kind of `input`, by what is on disk: a .klg file; a directory with
+/// associations.txt or depth.txt (TUM layout); a directory with colour/ and
+/// depth/ folders (Co-Fusion). Anything else is an error naming the path.
+InputKind input_kind(const std::string& input) {
+  if (input.rfind("synthetic:", 0) == 0) return InputKind::Synthetic;
+  const fs::path path(input);
+  std::error_code ec;
+  const fs::file_status status = fs::status(path, ec);
+  if (!fs::exists(status))
+    bad_input(input, ec && ec != std::errc::no_such_file_or_directory ? ec.message() : "not found");
+  if (fs::is_regular_file(status)) {
+    std::string extension = path.extension().string();
+    for (char& c : extension) c = char(std::tolower(static_cast<unsigned char>(c)));
+    if (extension == ".klg") return InputKind::Klg;
+    bad_input(input, "a file, but its name does not end in .klg");
+  }
+  if (!fs::is_directory(status)) bad_input(input, "neither a file nor a directory");
+  const auto is_file = [&](const char* name) { return fs::is_regular_file(path / name, ec); };
+  const auto is_dir = [&](const char* name) { return fs::is_directory(path / name, ec); };
+  if (is_file("associations.txt") || is_file("depth.txt")) return InputKind::Tum;
+  if (is_dir("colour") && is_dir("depth")) return InputKind::CoFusion;
+  std::string problem =
+      "neither a TUM-layout sequence (no associations.txt or depth.txt) nor a Co-Fusion folder (no colour/ and depth/ "
+      "folders)";
+  if (is_dir("colour")) problem += ": it has a colour/ folder but no depth/ folder";
+  if (is_dir("depth")) problem += ": it has a depth/ folder but no colour/ folder and no depth.txt";
+  throw std::runtime_error("'" + input + "': " + problem);
+}
+
+/// Checks --calibration and --intrinsics (at most one of them) and parses
+/// --intrinsics; the calibration file is read later, for recorded inputs.
+std::optional<PinholeCamera<double>> intrinsics_option(const RunOptions& o) {
+  if (!o.calibration.empty() && !o.intrinsics.empty())
+    throw std::invalid_argument("--calibration '" + o.calibration + "' and --intrinsics '" + o.intrinsics +
+                                "' both given: give only one of them");
+  if (o.intrinsics.empty()) return std::nullopt;
+  try {
+    return intrinsics_from_argument(o.intrinsics);
+  } catch (const std::invalid_argument& e) {
+    throw std::invalid_argument(std::string("--intrinsics: ") + e.what());
+  }
+}
+
+/// Where the camera came from, for messages.
+std::string camera_option_text(const RunOptions& o) {
+  if (!o.calibration.empty()) return "--calibration '" + o.calibration + "'";
+  if (!o.intrinsics.empty()) return "--intrinsics '" + o.intrinsics + "'";
+  return "";
+}
+
 Input open_input(const RunOptions& o) {
   Input in;
-  if (const auto params = synthetic_params(o.input)) {
+  // Bad options first, then what is on disk.
+  const std::optional<PinholeCamera<double>> intrinsics = intrinsics_option(o);
+  const InputKind kind = input_kind(o.input);
+  if (kind == InputKind::Synthetic) {
+    const auto params = synthetic_params(o.input);
+    const std::pair<bool, const char*> recording_options[] = {{!o.calibration.empty(), "--calibration"},
+                                                              {!o.intrinsics.empty(), "--intrinsics"},
+                                                              {o.depth_scale > 0, "--depth-scale"}};
+    for (const auto& [given, name] : recording_options)
+      if (given)
+        throw std::invalid_argument(std::string(name) + " does not apply to '" + o.input +
+                                    "': a synthetic scene has its own camera and depth in metres");
     auto seq = std::make_shared<sim::SyntheticSequence>(*params);
     // The detector's 40x40 px minimum is for 640x480 images, as the system's.
     sim::SimulatedDetectorParams dp;
@@ -105,25 +198,79 @@ Input open_input(const RunOptions& o) {
     for (int k = 0; k < seq->scene().object_count(); ++k)
       gt.objects[seq->scene().object_name(k)] = seq->scene().object_trajectory(k);
     in.truth = gt;
-    return in;
+  } else {
+    const std::optional<PinholeCamera<double>> camera =
+        o.calibration.empty() ? intrinsics : std::optional(read_calibration(o.calibration));
+    std::string camera_source = camera_option_text(o);
+    if (kind == InputKind::Klg) {
+      // A log has no intrinsics and no ground truth.
+      if (!camera) camera_source = "the default preset: give the camera with --calibration or --intrinsics";
+      auto seq = std::make_shared<KlgSequence>(KlgSequence::open(
+          o.input, camera ? *camera : intrinsics_preset("default"), o.depth_scale > 0 ? o.depth_scale : 1000.0));
+      in.frames = seq->size();
+      in.camera = seq->camera();
+      in.timestamp = [seq](std::size_t i) { return seq->timestamp(i); };
+      in.depth = [seq](std::size_t i) { return seq->depth(i); };
+    } else if (kind == InputKind::CoFusion) {
+      // The format has no ground truth that the reader offers.
+      if (o.depth_scale > 0)
+        throw std::invalid_argument("--depth-scale does not apply to '" + o.input +
+                                    "': a Co-Fusion folder's EXR depth is in metres");
+      CoFusionOptions copt;
+      copt.camera = camera;
+      auto seq = std::make_shared<CoFusionSequence>(CoFusionSequence::open(o.input, copt));
+      if (!camera) camera_source = "'" + seq->camera_source() + "'";  // a calibration.txt
+      in.frames = seq->size();
+      in.camera = seq->camera();
+      in.timestamp = [seq](std::size_t i) { return seq->timestamp(i); };
+      in.depth = [seq](std::size_t i) { return seq->depth(i); };
+    } else {
+      TumOptions topt;
+      if (o.depth_scale > 0) topt.depth_scale = o.depth_scale;
+      topt.camera = camera;
+      auto seq = std::make_shared<TumSequence>(TumSequence::open(o.input, topt));
+      if (!camera) {  // calibration.txt, or a text starting with "default"
+        const std::string& source = seq->camera_source();
+        camera_source = source.rfind("default", 0) == 0 ? source : "'" + source + "'";
+      }
+      in.frames = seq->size();
+      in.camera = seq->camera();
+      in.timestamp = [seq](std::size_t i) { return seq->timestamp(i); };
+      in.depth = [seq](std::size_t i) { return seq->depth(i); };
+      if (auto gt = seq->ground_truth()) in.truth = GroundTruth{*gt, {}};
+      if (in.truth)
+        for (auto& [name, traj] : seq->ground_truth_objects()) in.truth->objects[name] = traj;
+    }
+    // A camera of the wrong size shows on the first frame: fail before the
+    // run starts, saying where the camera came from.
+    if (in.frames > 0) {
+      try {
+        in.depth(0);
+      } catch (const std::runtime_error& e) {
+        throw std::runtime_error(std::string(e.what()) + " (camera " + std::to_string(in.camera.width) + "x" +
+                                 std::to_string(in.camera.height) + " from " + camera_source + ")");
+      }
+    }
+    if (kind == InputKind::Klg && !camera) {
+      const PinholeCamera<double>& c = in.camera;
+      std::fprintf(stderr,
+                   "emfusion: '%s' holds no intrinsics and neither --calibration nor --intrinsics is given: using the "
+                   "default preset (fx %g, fy %g, cx %g, cy %g, %dx%d)\n",
+                   o.input.c_str(), c.fx, c.fy, c.cx, c.cy, c.width, c.height);
+    }
   }
-  TumOptions topt;
-  if (o.depth_scale > 0) topt.depth_scale = o.depth_scale;
-  if (!o.calibration.empty()) topt.camera = read_calibration(o.calibration);
-  auto seq = std::make_shared<TumSequence>(TumSequence::open(o.input, topt));
-  in.frames = seq->size();
-  in.camera = seq->camera();
-  in.timestamp = [seq](std::size_t i) { return seq->timestamp(i); };
-  in.depth = [seq](std::size_t i) { return seq->depth(i); };
-  const std::string masks = !o.masks.empty() ? o.masks : (fs::path(o.input) / "masks").string();
-  if (!o.masks.empty() || fs::exists(fs::path(masks) / "masks.txt")) {
+  // Masks: --masks, else <input>/masks of a directory input when it has a masks.txt.
+  std::string masks = o.masks;
+  if (masks.empty() && (kind == InputKind::Tum || kind == InputKind::CoFusion)) {
+    std::error_code ec;
+    const fs::path folder = fs::path(o.input) / "masks";
+    if (fs::is_regular_file(folder / "masks.txt", ec)) masks = folder.string();
+  }
+  if (!masks.empty()) {
     auto dir = std::make_shared<MaskDirectory>(MaskDirectory::open(masks, in.camera.width, in.camera.height));
     in.detect = [dir](int i, double t) { return dir->detect(i, t); };
     in.detector = masks;
   }
-  if (auto gt = seq->ground_truth()) in.truth = GroundTruth{*gt, {}};
-  if (in.truth)
-    for (auto& [name, traj] : seq->ground_truth_objects()) in.truth->objects[name] = traj;
   return in;
 }
 
@@ -306,11 +453,19 @@ int main(int argc, char** argv) {
   app.require_subcommand(1);
   RunOptions o;
   auto* run_cmd = app.add_subcommand("run", "run the system on a sequence and write trajectories, objects and meshes");
-  run_cmd->add_option("input", o.input, "TUM-layout sequence directory, or synthetic:<scene>")->required();
+  run_cmd
+      ->add_option("input", o.input,
+                   "synthetic:<scene>, a .klg log, a Co-Fusion folder (colour/, depth/) or a TUM-layout sequence "
+                   "directory")
+      ->required();
   run_cmd->add_option("--output,-o", o.output, "output directory")->required();
   run_cmd->add_option("--masks", o.masks, "mask directory (default: <input>/masks when present)");
   run_cmd->add_option("--calibration", o.calibration, "calibration file: fx fy cx cy width height");
-  run_cmd->add_option("--depth-scale", o.depth_scale, "depth PNG value per metre (default 5000)")
+  run_cmd->add_option("--intrinsics", o.intrinsics,
+                      "camera: fr1, fr2, fr3, default (640x480) or fx,fy,cx,cy[,width,height] (not with "
+                      "--calibration)");
+  run_cmd
+      ->add_option("--depth-scale", o.depth_scale, "depth value per metre (default 5000 for PNG depth, 1000 for .klg)")
       ->check(CLI::PositiveNumber);
   run_cmd->add_option("--backend", o.backend, "cpu or cuda")->check(CLI::IsMember({"cpu", "cuda"}));
   run_cmd->add_option("--config", o.config, "parameter file: key = value per line")->check(CLI::ExistingFile);

@@ -1,8 +1,8 @@
 // TUM formats: trajectory and calibration files (round trips, comments,
 // errors naming file and line), sequence directories written on the fly
 // (associations, nearest-timestamp pairing of rgb.txt and depth.txt, depth in
-// metres, camera sources, bad input), and the real redkitchen_300 sequence
-// when shared/data is there.
+// metres, camera sources, depth-only copies, bad input), and the real
+// redkitchen_300 sequence when shared/data is there.
 #include <unistd.h>
 
 #include <cmath>
@@ -338,6 +338,59 @@ TEST_CASE("TumSequence prefers associations.txt and takes it as written", "[io][
   CHECK(seq.depth_path(1) == dir.file("depth/1.400000.png"));
   CHECK(seq.colour_path(1) == dir.file("rgb/1.420000.jpg"));
   CHECK(seq.has_colour());
+}
+
+TEST_CASE("TumSequence opens a copy without colour images as depth only, not a partial copy", "[io][tum]") {
+  ScratchDir dir;
+  write_pairing_sequence(dir);
+  const std::string assoc = dir.write("associations.txt",
+                                      "# t_rgb rgb t_depth depth\n"
+                                      "1.010000 rgb/1.010000.jpg 1.000000 depth/1.000000.png\n"
+                                      "1.095000 rgb/1.095000.jpg 1.100000 depth/1.100000.png\n"
+                                      "1.305000 rgb/1.305000.jpg 1.300000 depth/1.300000.png\n");
+  SECTION("associations.txt, every colour image absent: depth only") {
+    fs::remove_all(dir.file("rgb"));
+    const TumSequence seq = TumSequence::open(dir.path());
+    REQUIRE(seq.size() == 3);
+    CHECK_FALSE(seq.has_colour());
+    for (std::size_t i = 0; i < seq.size(); ++i) {
+      CHECK(seq.colour_path(i).empty());
+      CHECK(std::isnan(seq.colour_timestamp(i)));
+    }
+    CHECK(seq.timestamp(2) == 1.3);
+    CHECK(seq.depth_path(2) == dir.file("depth/1.300000.png"));
+    CHECK(seq.depth(0).to_host()[0] == 1.0f);
+  }
+  SECTION("associations.txt, some colour images absent: an error naming the first and the count") {
+    fs::remove(dir.file("rgb/1.095000.jpg"));
+    fs::remove(dir.file("rgb/1.305000.jpg"));
+    const std::string e = error_of([&] { TumSequence::open(dir.path()); });
+    CHECK(contains(e, "TumSequence::open: '" + assoc + "' line 3: colour image '" + dir.file("rgb/1.095000.jpg") +
+                          "' not found (2 of 3 frames lack their colour image"));
+  }
+  SECTION("associations.txt, depth images must all exist even without colour") {
+    fs::remove_all(dir.file("rgb"));
+    fs::remove(dir.file("depth/1.100000.png"));
+    CHECK_THROWS_WITH(TumSequence::open(dir.path()), EMF_CONTAINS("'" + assoc + "' line 3: depth image '" +
+                                                                  dir.file("depth/1.100000.png") + "' not found"));
+  }
+  SECTION("rgb.txt pairing, every colour image absent: the same frames, depth only") {
+    fs::remove(assoc);
+    fs::remove_all(dir.file("rgb"));
+    const TumSequence seq = TumSequence::open(dir.path());
+    REQUIRE(seq.size() == 4);  // paired as with the images: the depth frame at 1.2 s is still dropped
+    CHECK_FALSE(seq.has_colour());
+    CHECK(seq.timestamp(2) == 1.3);
+    CHECK(seq.colour_path(2).empty());
+    CHECK(std::isnan(seq.colour_timestamp(2)));
+  }
+  SECTION("rgb.txt pairing, some colour images absent: an error") {
+    fs::remove(assoc);
+    for (const char* t : {"1.010000", "1.095000", "1.305000"}) fs::remove(dir.file(std::string("rgb/") + t + ".jpg"));
+    CHECK_THROWS_WITH(TumSequence::open(dir.path()),
+                      EMF_CONTAINS("rgb.txt' line 2: colour image '" + dir.file("rgb/1.010000.jpg") +
+                                   "' not found (3 of 4 frames lack their colour image"));
+  }
 }
 
 TEST_CASE("TumSequence takes its camera from the options, calibration.txt or the default", "[io][tum]") {

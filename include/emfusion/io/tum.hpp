@@ -308,8 +308,16 @@ struct TumOptions {
 /// Lists must have strictly increasing timestamps (depth timestamps in
 /// associations.txt).
 ///
-/// open() checks everything it can cheaply: the lists, that every image it
-/// refers to exists, the calibration. Depth images are read on demand.
+/// Depth-only copies: when the list names colour images but none of the
+/// kept frames' colour images exists (a sequence copied without rgb/), the
+/// sequence opens without colour: the same frames, has_colour() false,
+/// colour_path(i) empty and colour_timestamp(i) NaN, as without rgb.txt.
+/// Some colour images present and others missing is an error (a partial
+/// copy), naming the first missing one and the count.
+///
+/// open() checks everything it can cheaply: the lists, that every depth
+/// image it refers to exists (and the colour images, all or none), the
+/// calibration. Depth images are read on demand.
 class TumSequence {
  public:
   static TumSequence open(const std::string& dir, const TumOptions& options = {});
@@ -322,9 +330,11 @@ class TumSequence {
   double colour_timestamp(std::size_t i) const { return frame(i, "TumSequence::colour_timestamp").colour_timestamp; }
   /// Path of frame i's depth image (directory joined with the list entry).
   const std::string& depth_path(std::size_t i) const { return frame(i, "TumSequence::depth_path").depth_path; }
-  /// Path of frame i's colour image; empty when the sequence has no rgb.txt.
+  /// Path of frame i's colour image; empty when the sequence has no colour
+  /// (no rgb.txt, or a depth-only copy whose colour images are all absent).
   const std::string& colour_path(std::size_t i) const { return frame(i, "TumSequence::colour_path").colour_path; }
-  /// True when every frame has a colour image.
+  /// True when every frame has a colour image; false for a sequence without
+  /// colour (then no frame has one).
   bool has_colour() const { return has_colour_; }
 
   const PinholeCamera<double>& camera() const { return camera_; }
@@ -396,6 +406,25 @@ inline TumSequence TumSequence::open(const std::string& dir, const TumOptions& o
     if (!tum::is_file(path))
       tum::fail_at(where, list, line, std::string(what) + " " + tum::quoted(path) + " not found");
   };
+  // Colour images may all be absent (a depth-only copy), not only some.
+  std::size_t colour_missing = 0;  // frames whose colour image does not exist
+  std::string first_missing_list, first_missing_colour;
+  int first_missing_line = 0;
+  const auto check_colour = [&](const std::string& list, int line, const std::string& path) {
+    if (tum::is_file(path)) return;
+    if (colour_missing++ == 0) first_missing_list = list, first_missing_line = line, first_missing_colour = path;
+  };
+  const auto settle_colour = [&] {
+    if (!seq.has_colour_ || colour_missing == 0) return;
+    if (colour_missing < seq.frames_.size())
+      tum::fail_at(where, first_missing_list, first_missing_line,
+                   "colour image " + tum::quoted(first_missing_colour) + " not found (" +
+                       std::to_string(colour_missing) + " of " + std::to_string(seq.frames_.size()) +
+                       " frames lack their colour image: a sequence may lack all of them, as a depth-only copy, "
+                       "but not only some)");
+    seq.has_colour_ = false;
+    for (Frame& f : seq.frames_) f.colour_path.clear(), f.colour_timestamp = std::nan("");
+  };
 
   if (tum::is_file(associations)) {
     seq.has_colour_ = true;
@@ -410,11 +439,12 @@ inline TumSequence TumSequence::open(const std::string& dir, const TumOptions& o
                tum::format(seq.frames_.back().timestamp) + "): timestamps must increase strictly");
       f.colour_path = tum::join(dir, line.fields[1]);
       f.depth_path = tum::join(dir, line.fields[3]);
-      require_file(associations, line.number, "colour image", f.colour_path);
       require_file(associations, line.number, "depth image", f.depth_path);
+      check_colour(associations, line.number, f.colour_path);
       seq.frames_.push_back(std::move(f));
     }
     if (seq.frames_.empty()) tum::fail(where, associations, "no frames");
+    settle_colour();
   } else if (tum::is_file(depth_list)) {
     const std::vector<tum::ListEntry> depth = tum::read_list(depth_list, where);
     if (depth.empty()) tum::fail(where, depth_list, "no frames");
@@ -441,7 +471,7 @@ inline TumSequence TumSequence::open(const std::string& dir, const TumOptions& o
         if (best == rgb.end() || std::abs(best->timestamp - d.timestamp) > max_difference) continue;
         f.colour_timestamp = best->timestamp;
         f.colour_path = tum::join(dir, best->path);
-        require_file(rgb_list, best->line, "colour image", f.colour_path);
+        check_colour(rgb_list, best->line, f.colour_path);
       }
       require_file(depth_list, d.line, "depth image", f.depth_path);
       seq.frames_.push_back(std::move(f));
@@ -450,6 +480,7 @@ inline TumSequence TumSequence::open(const std::string& dir, const TumOptions& o
       tum::fail(where, dir,
                 "no frames: no depth frame of depth.txt has an rgb.txt frame within " +
                     tum::format(options.max_time_difference) + " s");
+    settle_colour();
   } else {
     tum::fail(where, dir, "neither associations.txt nor depth.txt found");
   }
