@@ -17,6 +17,7 @@ EMFUSION_DEBIAN_PACKAGES=(
   libomp-dev
   zlib1g-dev
   libpng-dev
+  libjpeg-dev
 )
 
 log() { echo "[setup-debian] $*"; }

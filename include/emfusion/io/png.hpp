@@ -1,5 +1,6 @@
-// Reading and writing single-channel PNG images (depth maps, instance-label
-// masks) through libpng, without OpenCV.
+// Reading and writing PNG images through libpng, without OpenCV: single-
+// channel ones (depth maps, instance-label masks) and 8-bit colour ones
+// (colour frames, the pictures of io/pictures.hpp).
 //
 // read_png_u16 reads 16-bit grayscale PNGs, and also 8-bit (or 1/2/4-bit)
 // grayscale ones, whose values it widens unchanged (a label 7 stays 7; it is
@@ -7,10 +8,19 @@
 // that need 16 bits (depth images) check that themselves, as TumSequence does.
 // read_png_u8 reads 8-bit (or 1/2/4-bit, values unchanged) grayscale PNGs and
 // rejects 16-bit ones rather than drop their low byte. Colour, palette and
-// alpha PNGs are rejected: there is no silent conversion to gray.
+// alpha PNGs are rejected by these two: there is no silent conversion to gray.
 //
-// write_png writes 8- or 16-bit grayscale, non-interlaced. Like write_ply it
-// writes "<path>.tmp" and renames it over `path` only once it is complete.
+// read_png_rgb (and decode_png_rgb, from bytes in memory) reads any 8-bit
+// (or 1/2/4-bit) PNG as colour: RGB as stored, palette entries looked up,
+// gray replicated to r = g = b (1/2/4-bit gray scaled to 0..255, so a 1-bit
+// white is 255), alpha and tRNS transparency dropped (the colour samples are
+// kept as stored, not blended over anything). 16-bit PNGs are rejected, not
+// scaled: colour frames are 8-bit, and a 16-bit file there is almost always
+// a depth image passed by mistake.
+//
+// write_png writes 8- or 16-bit grayscale, or 8-bit RGB, non-interlaced.
+// Like write_ply it writes "<path>.tmp" and renames it over `path` only once
+// it is complete.
 //
 // Errors are std::runtime_error "read_png: '<path>': <problem>" (or
 // "write_png: ..."): a file that cannot be opened, a file that is not a PNG,
@@ -39,6 +49,7 @@
 
 #include "emfusion/core/backend.hpp"
 #include "emfusion/core/image.hpp"
+#include "emfusion/io/colour.hpp"
 #include "emfusion/io/detail/files.hpp"
 
 namespace emfusion {
@@ -104,6 +115,27 @@ inline bool read_header(png_structp png, png_infop info, Header* header) {
   return true;
 }
 
+/// Reads the header and, for files of 8 bits or fewer, sets up the
+/// transformations to 8-bit RGB: palette to RGB, 1/2/4-bit gray scaled to
+/// 8 bits, gray to RGB, alpha stripped (tRNS is ignored: it is not expanded
+/// to alpha). 16-bit files get no transformation; the caller rejects them.
+inline bool read_header_rgb(png_structp png, png_infop info, Header* header) {
+  if (setjmp(png_jmpbuf(png))) return false;
+  png_read_info(png, info);
+  png_get_IHDR(png, info, &header->width, &header->height, &header->bit_depth, &header->color_type, &header->interlace,
+               nullptr, nullptr);
+  if (header->bit_depth > 8) return true;
+  if (header->color_type == PNG_COLOR_TYPE_PALETTE) png_set_palette_to_rgb(png);
+  if (header->color_type == PNG_COLOR_TYPE_GRAY && header->bit_depth < 8) png_set_expand_gray_1_2_4_to_8(png);
+  if (header->color_type == PNG_COLOR_TYPE_GRAY || header->color_type == PNG_COLOR_TYPE_GRAY_ALPHA)
+    png_set_gray_to_rgb(png);
+  if (header->color_type & PNG_COLOR_MASK_ALPHA) png_set_strip_alpha(png);
+  png_set_interlace_handling(png);
+  png_read_update_info(png, info);
+  header->row_bytes = png_get_rowbytes(png, info);
+  return true;
+}
+
 inline bool read_rows(png_structp png, png_bytepp rows) {
   if (setjmp(png_jmpbuf(png))) return false;
   png_read_image(png, rows);
@@ -112,11 +144,11 @@ inline bool read_rows(png_structp png, png_bytepp rows) {
 }
 
 inline bool write_rows(png_structp png, png_infop info, std::FILE* file, png_uint_32 width, png_uint_32 height,
-                       int bit_depth, png_bytepp rows) {
+                       int bit_depth, int color_type, png_bytepp rows) {
   if (setjmp(png_jmpbuf(png))) return false;
   png_init_io(png, file);
-  png_set_IHDR(png, info, width, height, bit_depth, PNG_COLOR_TYPE_GRAY, PNG_INTERLACE_NONE,
-               PNG_COMPRESSION_TYPE_DEFAULT, PNG_FILTER_TYPE_DEFAULT);
+  png_set_IHDR(png, info, width, height, bit_depth, color_type, PNG_INTERLACE_NONE, PNG_COMPRESSION_TYPE_DEFAULT,
+               PNG_FILTER_TYPE_DEFAULT);
   png_write_info(png, info);
   if (bit_depth == 16 && std::endian::native == std::endian::little) png_set_swap(png);
   png_write_image(png, rows);  // libpng copies each row before swapping: `rows` stays as it was
@@ -162,6 +194,37 @@ inline std::string color_type_name(int color_type) {
   return "colour type " + std::to_string(color_type);
 }
 
+/// Checks the signature of the `size` bytes at `data` (a PNG file named
+/// `path` in messages) and sets up `s` to read them through `context`.
+inline void start_read(const unsigned char* data, std::size_t size, const std::string& path, Context& context,
+                       ReadStructs& s) {
+  constexpr const char* where = "read_png";
+  if (size < 8 || png_sig_cmp(data, 0, 8) != 0)
+    fail(where, path, size == 0 ? "not a PNG file (the file is empty)" : "not a PNG file (bad signature)");
+  context.data = data;
+  context.size = size;
+  s.png = png_create_read_struct(PNG_LIBPNG_VER_STRING, &context, on_error, on_warning);
+  if (s.png) s.info = png_create_info_struct(s.png);
+  if (!s.png || !s.info) fail(where, path, "cannot initialise libpng (out of memory or a libpng version mismatch)");
+  png_set_read_fn(s.png, &context, read_from_memory);
+}
+
+/// Throws for a header whose size cannot be stored in `file_size` bytes or
+/// does not fit an Image.
+inline void check_size(const Header& header, std::size_t file_size, const std::string& path) {
+  constexpr const char* where = "read_png";
+  const std::size_t width = header.width, height = header.height;
+  // Deflate compresses at most about 1032:1: a header that promises more
+  // pixels than the file could hold is corrupt, and must not make us
+  // allocate gigabytes.
+  if (height * (header.row_bytes + 1) > 1100 * file_size + 4096)
+    fail(where, path,
+         "corrupt header: a " + std::to_string(width) + "x" + std::to_string(height) + " image cannot be stored in " +
+             std::to_string(file_size) + " bytes");
+  if (width == 0 || height == 0 || width * height > std::size_t(INT32_MAX))
+    fail(where, path, "unsupported image size " + std::to_string(width) + "x" + std::to_string(height));
+}
+
 /// Reads a grayscale PNG into an image of T (std::uint8_t or std::uint16_t).
 /// A 16-bit T also takes files of 8 bits or fewer when `allow_narrower`,
 /// values unchanged.
@@ -172,19 +235,10 @@ Image<T, Host> read_gray(const std::string& path, bool allow_narrower) {
   constexpr int target_bits = 8 * int(sizeof(T));
 
   const std::string file = io::read_file(path, where);
-  const auto* bytes_data = reinterpret_cast<const unsigned char*>(file.data());
   const std::string_view bytes = file;
-  if (bytes.size() < 8 || png_sig_cmp(bytes_data, 0, 8) != 0)
-    fail(where, path, bytes.empty() ? "not a PNG file (the file is empty)" : "not a PNG file (bad signature)");
-
   Context context;
-  context.data = bytes_data;
-  context.size = bytes.size();
   ReadStructs s;
-  s.png = png_create_read_struct(PNG_LIBPNG_VER_STRING, &context, on_error, on_warning);
-  if (s.png) s.info = png_create_info_struct(s.png);
-  if (!s.png || !s.info) fail(where, path, "cannot initialise libpng (out of memory or a libpng version mismatch)");
-  png_set_read_fn(s.png, &context, read_from_memory);
+  start_read(reinterpret_cast<const unsigned char*>(file.data()), file.size(), path, context, s);
 
   const auto corrupt = [&] { fail(where, path, std::string("corrupt or truncated PNG: ") + context.message); };
   Header header;
@@ -208,15 +262,7 @@ Image<T, Host> read_gray(const std::string& path, bool allow_narrower) {
   if (header.row_bytes != width * sample_bytes)
     fail(where, path,
          "unexpected decoded row size " + std::to_string(header.row_bytes) + " for width " + std::to_string(width));
-  // Deflate compresses at most about 1032:1: a header that promises more
-  // pixels than the file could hold is corrupt, and must not make us
-  // allocate gigabytes.
-  if (height * (header.row_bytes + 1) > 1100 * bytes.size() + 4096)
-    fail(where, path,
-         "corrupt header: a " + std::to_string(width) + "x" + std::to_string(height) + " image cannot be stored in " +
-             std::to_string(bytes.size()) + " bytes");
-  if (width == 0 || height == 0 || width * height > std::size_t(INT32_MAX))
-    fail(where, path, "unsupported image size " + std::to_string(width) + "x" + std::to_string(height));
+  check_size(header, bytes.size(), path);
 
   Image<T, Host> image(static_cast<int>(width), static_cast<int>(height));
   T* pixels = image.view().data;
@@ -231,9 +277,40 @@ Image<T, Host> read_gray(const std::string& path, bool allow_narrower) {
   return image;
 }
 
+/// Reads the `size` bytes at `data`, a PNG of 8 bits or fewer per sample,
+/// as 8-bit RGB (see read_header_rgb); `path` names it in messages.
+inline Image<Rgb8, Host> read_rgb(const unsigned char* data, std::size_t size, const std::string& path) {
+  constexpr const char* where = "read_png";
+  Context context;
+  ReadStructs s;
+  start_read(data, size, path, context, s);
+  const auto corrupt = [&] { fail(where, path, std::string("corrupt or truncated PNG: ") + context.message); };
+  Header header;
+  if (!read_header_rgb(s.png, s.info, &header)) corrupt();
+  if (header.bit_depth > 8)
+    fail(where, path,
+         std::to_string(header.bit_depth) + "-bit " + color_type_name(header.color_type) +
+             " PNG, but colour images must be 8-bit (is it a depth image?)");
+  const std::size_t width = header.width, height = header.height;
+  if (header.row_bytes != width * 3)
+    fail(where, path,
+         "unexpected decoded row size " + std::to_string(header.row_bytes) + " for width " + std::to_string(width) +
+             " (expected 3 bytes per pixel)");
+  check_size(header, size, path);
+
+  Image<Rgb8, Host> image(static_cast<int>(width), static_cast<int>(height));
+  Rgb8* pixels = image.view().data;
+  std::vector<png_bytep> rows(height);
+  for (std::size_t y = 0; y < height; ++y) rows[y] = reinterpret_cast<png_bytep>(pixels + y * width);
+  if (!read_rows(s.png, rows.data())) corrupt();
+  return image;
+}
+
 template <class T>
-void write_gray(const std::string& path, const Image<T, Host>& image) {
-  static_assert(std::is_same_v<T, std::uint8_t> || std::is_same_v<T, std::uint16_t>);
+void write_image(const std::string& path, const Image<T, Host>& image) {
+  static_assert(std::is_same_v<T, std::uint8_t> || std::is_same_v<T, std::uint16_t> || std::is_same_v<T, Rgb8>);
+  constexpr bool colour = std::is_same_v<T, Rgb8>;
+  constexpr int bit_depth = colour ? 8 : 8 * int(sizeof(T));
   constexpr const char* where = "write_png";
   if (image.empty())
     throw std::invalid_argument(std::string(where) + ": " + quoted(path) + ": cannot write an empty image (" +
@@ -253,8 +330,8 @@ void write_gray(const std::string& path, const Image<T, Host>& image) {
 
   io::AtomicFile file(where, path);
   errno = 0;
-  const bool ok = write_rows(s.png, s.info, file.get(), png_uint_32(view.width), png_uint_32(view.height),
-                             8 * int(sizeof(T)), rows.data());
+  const bool ok = write_rows(s.png, s.info, file.get(), png_uint_32(view.width), png_uint_32(view.height), bit_depth,
+                             colour ? PNG_COLOR_TYPE_RGB : PNG_COLOR_TYPE_GRAY, rows.data());
   file.commit(ok ? "" : std::string(context.message) + (errno != 0 ? " (" + errno_text(errno) + ")" : ""));
 }
 
@@ -272,16 +349,34 @@ inline Image<std::uint8_t, Host> read_png_u8(const std::string& path) {
   return detail::png::read_gray<std::uint8_t>(path, /*allow_narrower=*/true);
 }
 
+/// Reads an 8-bit (or 1/2/4-bit) PNG of any colour type as RGB: palette
+/// looked up, gray replicated, alpha dropped. 16-bit PNGs are an error.
+inline Image<Rgb8, Host> read_png_rgb(const std::string& path) {
+  const std::string file = detail::io::read_file(path, "read_png");
+  return detail::png::read_rgb(reinterpret_cast<const unsigned char*>(file.data()), file.size(), path);
+}
+
+/// read_png_rgb of a PNG file's `size` bytes in memory; `name` stands for the
+/// file in error messages.
+inline Image<Rgb8, Host> decode_png_rgb(const void* data, std::size_t size, const std::string& name) {
+  return detail::png::read_rgb(static_cast<const unsigned char*>(data), size, name);
+}
+
 /// Writes a 16-bit grayscale PNG. Throws std::invalid_argument for an empty
 /// image, std::runtime_error if the file cannot be written (any earlier file
 /// at `path` is then left as it was).
 inline void write_png(const std::string& path, const Image<std::uint16_t, Host>& image) {
-  detail::png::write_gray(path, image);
+  detail::png::write_image(path, image);
 }
 
 /// Writes an 8-bit grayscale PNG (see the 16-bit overload).
 inline void write_png(const std::string& path, const Image<std::uint8_t, Host>& image) {
-  detail::png::write_gray(path, image);
+  detail::png::write_image(path, image);
+}
+
+/// Writes an 8-bit RGB PNG (see the 16-bit overload).
+inline void write_png(const std::string& path, const Image<Rgb8, Host>& image) {
+  detail::png::write_image(path, image);
 }
 
 }  // namespace emfusion
