@@ -50,6 +50,7 @@
 #include "emfusion/io/intrinsics.hpp"
 #include "emfusion/io/klg.hpp"
 #include "emfusion/io/masks.hpp"
+#include "emfusion/io/pictures.hpp"
 #include "emfusion/io/ply.hpp"
 #include "emfusion/io/run_outputs.hpp"
 #include "emfusion/io/tum.hpp"
@@ -70,6 +71,7 @@ struct RunOptions {
   std::vector<std::string> overrides;
   int max_frames = 0;
   bool verbose = false;
+  bool pictures = false;
 };
 
 /// Ground truth of an input, when it has any.
@@ -84,6 +86,8 @@ struct Input {
   PinholeCamera<double> camera;
   std::function<double(std::size_t)> timestamp;
   std::function<Image<float, Host>(std::size_t)> depth;
+  /// Frame i's colour image, when the input has one (pictures only).
+  std::function<std::optional<ColourImage>(std::size_t)> colour = [](std::size_t) { return std::nullopt; };
   std::function<std::optional<Detections>(int, double)> detect = [](int, double) { return std::nullopt; };
   std::string detector = "none";
   std::optional<GroundTruth> truth;
@@ -211,6 +215,12 @@ Input open_input(const RunOptions& o) {
       in.camera = seq->camera();
       in.timestamp = [seq](std::size_t i) { return seq->timestamp(i); };
       in.depth = [seq](std::size_t i) { return seq->depth(i); };
+      in.colour = [seq, path = o.input](std::size_t i) -> std::optional<ColourImage> {
+        const std::vector<std::uint8_t> bytes = seq->colour_bytes(i);
+        if (bytes.empty()) return std::nullopt;
+        if (seq->colour_is_jpeg(i)) return decode_jpeg(bytes, path + " frame " + std::to_string(i));
+        return colour_from_rgb_bytes(bytes, seq->camera().width, seq->camera().height);
+      };
     } else if (kind == InputKind::CoFusion) {
       // The format has no ground truth that the reader offers.
       if (o.depth_scale > 0)
@@ -224,6 +234,7 @@ Input open_input(const RunOptions& o) {
       in.camera = seq->camera();
       in.timestamp = [seq](std::size_t i) { return seq->timestamp(i); };
       in.depth = [seq](std::size_t i) { return seq->depth(i); };
+      in.colour = [seq](std::size_t i) { return std::optional(read_colour(seq->colour_path(i))); };
     } else {
       TumOptions topt;
       if (o.depth_scale > 0) topt.depth_scale = o.depth_scale;
@@ -237,6 +248,8 @@ Input open_input(const RunOptions& o) {
       in.camera = seq->camera();
       in.timestamp = [seq](std::size_t i) { return seq->timestamp(i); };
       in.depth = [seq](std::size_t i) { return seq->depth(i); };
+      if (seq->has_colour())
+        in.colour = [seq](std::size_t i) { return std::optional(read_colour(seq->colour_path(i))); };
       if (auto gt = seq->ground_truth()) in.truth = GroundTruth{*gt, {}};
       if (in.truth)
         for (auto& [name, traj] : seq->ground_truth_objects()) in.truth->objects[name] = traj;
@@ -318,6 +331,30 @@ void print_evaluation(const Trajectory& est_cam, const std::map<int, Trajectory>
   if (json) json->end();
 }
 
+/// The pictures of one frame (docs/user-guide.md section 4): the rendered
+/// segmentation over the colour image, and each model's association.
+template <class B>
+void write_pictures(const std::string& dir, std::size_t frame, const std::optional<ColourImage>& colour,
+                    const System<S, B>& system, const FrameResult& result) {
+  char number[16];
+  std::snprintf(number, sizeof(number), "%06zu", frame);
+  const ColourImage* c = colour ? &*colour : nullptr;
+  // The segmentation and the association images of this frame were made
+  // before its deletions and creations: label (model) k + 1 is the k-th
+  // object of object_status.
+  std::vector<int> ids;
+  for (const ObjectStatus& st : result.object_status) ids.push_back(st.id);
+  const Image<int, Host> seg = system.segmentation().template to<Host>();
+  write_png((fs::path(dir) / ("segmentation_" + std::string(number) + ".png")).string(),
+            segmentation_overlay(c, seg, 0.5f, &ids));
+  const auto& q = system.associations();
+  for (int m = 0; m < q.model_count() && m <= int(ids.size()); ++m) {
+    const std::string model = m == 0 ? "background" : "object_" + std::to_string(ids[std::size_t(m - 1)]);
+    write_png((fs::path(dir) / ("association_" + std::string(number) + "_" + model + ".png")).string(),
+              association_heatmap(q.image(m).template to<Host>(), c));
+  }
+}
+
 template <class B>
 void run(const RunOptions& o) {
   SystemParams<S> params;
@@ -333,6 +370,8 @@ void run(const RunOptions& o) {
   create_output_directory(o.output);
   create_output_directory((fs::path(o.output) / "objects").string());
   create_output_directory((fs::path(o.output) / "meshes").string());
+  const std::string pictures = (fs::path(o.output) / "pictures").string();
+  if (o.pictures) create_output_directory(pictures);
 
   const B backend{};
   System<S, B> system(in.camera.cast<S>(), params, backend);
@@ -345,6 +384,7 @@ void run(const RunOptions& o) {
     const std::optional<Detections> det = in.detect(int(i), t);
     const FrameResult r = system.process(depth, t, det ? &*det : nullptr);
     times.push_back(r.times);
+    if (o.pictures) write_pictures(pictures, i, in.colour(i), system, r);
     if (o.verbose) {
       for (const int id : r.created) std::fprintf(stderr, "%sframe %zu: created object %d\n", tty ? "\n" : "", i, id);
       for (const int id : r.deleted)
@@ -444,6 +484,14 @@ void evaluate(const std::string& sequence, const std::string& output) {
   print_evaluation(est_cam, est_objects, gt, &json);
   json.end();
   write_text_file((fs::path(output) / "eval.json").string(), json.str());
+  // The camera's ground truth and its estimate after the ATE alignment, from above.
+  if (est_cam.size() >= 3) {
+    const auto ate = eval::absolute_trajectory_error(est_cam, gt.camera);
+    write_png((fs::path(output) / "trajectory.png").string(),
+              trajectory_plot({trajectory_series(gt.camera, "ground truth", plot_black),
+                               trajectory_series(est_cam, "estimate", label_colour(0), ate.T_gt_est)}));
+    std::printf("wrote %s\n", (fs::path(output) / "trajectory.png").string().c_str());
+  }
 }
 
 }  // namespace
@@ -472,6 +520,8 @@ int main(int argc, char** argv) {
   run_cmd->add_option("--set", o.overrides, "override a parameter: key=value (repeatable)");
   run_cmd->add_option("--max-frames", o.max_frames, "process at most N frames")->check(CLI::PositiveNumber);
   run_cmd->add_flag("--verbose,-v", o.verbose, "log object creation and deletion");
+  run_cmd->add_flag("--pictures", o.pictures,
+                    "write per-frame segmentation and association pictures to <output>/pictures/");
   std::string eval_sequence, eval_output;
   auto* eval_cmd = app.add_subcommand("eval", "evaluate a run's outputs against a sequence's ground truth");
   eval_cmd->add_option("sequence", eval_sequence, "sequence directory or synthetic:<scene>")->required();
