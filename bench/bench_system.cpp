@@ -33,6 +33,7 @@
 #include "emfusion/sim/dynamic_scene.hpp"
 #include "emfusion/slam/system.hpp"
 #include "support/args.hpp"
+#include "support/backend.hpp"
 
 using namespace emfusion;
 using S = float;
@@ -212,17 +213,7 @@ int main(int argc, char** argv) {
       else if (a == "--json") o.json = v;
       else throw std::invalid_argument("unknown option '" + a + "'");
     }
-    if (o.backend == "cuda") {
-#if EMFUSION_HAS_CUDA
-      run<Cuda>(o);
-#else
-      throw std::invalid_argument("--backend 'cuda' is not available: this build has no CUDA");
-#endif
-    } else if (o.backend == "cpu") {
-      run<Host>(o);
-    } else {
-      throw std::invalid_argument("--backend must be cpu or cuda, got '" + o.backend + "'");
-    }
+    examples::with_backend(o.backend, [&](auto backend) { run<decltype(backend)>(o); });
     return 0;
   } catch (const std::exception& e) {
     std::fprintf(stderr, "bench_system: error: %s\n", e.what());

@@ -58,6 +58,7 @@
 #include "emfusion/sim/dynamic_scene.hpp"
 #include "emfusion/slam/system.hpp"
 #include "emfusion/volume/marching_cubes.hpp"
+#include "support/backend.hpp"
 
 using namespace emfusion;
 using S = float;
@@ -533,15 +534,7 @@ int main(int argc, char** argv) {
   }
   try {
     if (*run_cmd) {
-      if (o.backend == "cuda") {
-#if EMFUSION_HAS_CUDA
-        run<Cuda>(o);
-#else
-        throw std::invalid_argument("--backend 'cuda' is not available: this build has no CUDA");
-#endif
-      } else {
-        run<Host>(o);
-      }
+      examples::with_backend(o.backend, [&](auto backend) { run<decltype(backend)>(o); });
     } else {
       evaluate(eval_sequence, eval_output);
     }
