@@ -261,6 +261,11 @@ TEST_CASE("write_exr round-trips floats exactly with every compression", "[io][e
   }
   CHECK(sizes[1] < sizes[0]);
   CHECK(sizes[2] < sizes[1]);
+  // decode_exr reads the same bytes from memory.
+  const std::string coarse_bytes = read_bytes(dir.file("coarse2.exr"));
+  CHECK(decode_exr(coarse_bytes.data(), coarse_bytes.size(), "mem").to_host() ==
+        read_exr(dir.file("coarse2.exr")).to_host());
+  CHECK_THROWS_WITH(decode_exr(coarse_bytes.data(), 7, "mem"), EMF_CONTAINS("read_exr: 'mem': not an OpenEXR file"));
 
   // Data zlib cannot shrink is stored raw inside a ZIP file, and still reads.
   Image<float, Host> noise(9, 5);

@@ -258,6 +258,21 @@ TEST_CASE("MaskDirectory::open reports missing directories and files", "[io][mas
   CHECK_THROWS_AS(MaskDirectory::open(dir.path(), 640, 0), std::invalid_argument);
 }
 
+TEST_CASE("MaskDirectory::parse checks masks.txt text without the file system", "[io][masks]") {
+  const MaskDirectory m = MaskDirectory::parse("0.5 a.png 1:cup:0.9 2:book:0.5\n0.6 sub/b.png\n", "nowhere", 64, 48);
+  REQUIRE(m.size() == 2);
+  CHECK(m.list_path() == "nowhere/masks.txt");
+  CHECK(m.label_path(1) == "nowhere/sub/b.png");
+  REQUIRE(m.instances(0).size() == 2);
+  CHECK(m.instances(0)[1].class_name == "book");
+  CHECK(m.nearest(0.61) == std::optional<std::size_t>(1));
+  // The label images are read (and found missing) only by read().
+  CHECK_THROWS_WITH(m.read(0), EMF_CONTAINS("MaskDirectory::read: 'nowhere/masks.txt' line 1: cannot read"));
+  CHECK_THROWS_WITH(MaskDirectory::parse("0.5 a.png 0:cup:0.9\n", "nowhere"),
+                    EMF_CONTAINS("MaskDirectory::open: 'nowhere/masks.txt' line 1: instance '0:cup:0.9'"));
+  CHECK_THROWS_AS(MaskDirectory::parse("", "nowhere", 64, 0), std::invalid_argument);
+}
+
 TEST_CASE("MaskDirectory::open reports bad masks.txt lines with file, line and problem", "[io][masks]") {
   struct Case {
     const char* line;     // the third line of masks.txt

@@ -116,6 +116,14 @@ TEST_CASE("write_png and read_png round-trip 16-bit and 8-bit images exactly", "
     write_png(dir.file("c.png"), Image<std::uint16_t, Host>(1, 1, 65000));
     CHECK(read_png_u16(dir.file("c.png")).to_host() == std::vector<std::uint16_t>{65000});
   }
+  SECTION("decode_png_u16 and decode_png_u8 read the same bytes from memory") {
+    const auto image = random_image<std::uint8_t>(6, 5, 3);
+    write_png(dir.file("d.png"), image);
+    const std::string bytes = read_bytes(dir.file("d.png"));
+    CHECK(decode_png_u8(bytes.data(), bytes.size(), "mem").to_host() == image.to_host());
+    CHECK(decode_png_u16(bytes.data(), bytes.size(), "mem").to_host() == read_png_u16(dir.file("d.png")).to_host());
+    CHECK_THROWS_WITH(decode_png_u16(bytes.data(), 20, "mem"), EMF_CONTAINS("read_png: 'mem': corrupt or truncated"));
+  }
 }
 
 TEST_CASE("read_png reads samples in PNG (big-endian) order and unpacks low bit depths", "[io][png]") {

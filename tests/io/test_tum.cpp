@@ -166,6 +166,30 @@ TEST_CASE("read_tum_trajectory takes comments, blank lines, tabs, commas and CRL
   CHECK(read_tum_trajectory(dir.write("empty.txt", "# nothing yet\n")).empty());
 }
 
+TEST_CASE("The TUM readers take text in memory, naming it in messages", "[io][tum]") {
+  ScratchDir dir;
+  const std::vector<TimedPose> poses = parse_tum_trajectory("0.5 1 2 3 0 0 0 1\n0.75 0 0 0 1 0 0 0\n", "gt");
+  REQUIRE(poses.size() == 2);
+  write_tum_trajectory(dir.file("gt.txt"), poses);
+  CHECK(format_tum_trajectory(poses, "gt") == read_bytes(dir.file("gt.txt")));
+  CHECK_THROWS_WITH(parse_tum_trajectory("0.5 1 2 3 0 0 0 1\n0.5 1 2 3 0 0 0 1\n", "gt"),
+                    EMF_CONTAINS("read_tum_trajectory: 'gt' line 2: timestamp 0.5 is not after"));
+  CHECK_THROWS_AS(format_tum_trajectory({poses[0], poses[0]}, "gt"), std::invalid_argument);
+
+  const PinholeCamera<double> camera = parse_calibration("# c\n500 501 320 240 640 480\n", "calib");
+  CHECK(camera.fy == 501.0);
+  CHECK(camera.height == 480);
+  CHECK_THROWS_WITH(parse_calibration("", "calib"), EMF_CONTAINS("read_calibration: 'calib': no calibration line"));
+
+  const std::vector<TumListEntry> list = parse_tum_list("# d\n1.5 depth/a.png\n\n2.5 depth/b.png\n", "depth.txt");
+  REQUIRE(list.size() == 2);
+  CHECK(list[1].timestamp == 2.5);
+  CHECK(list[1].path == "depth/b.png");
+  CHECK(list[1].line == 4);
+  CHECK_THROWS_WITH(parse_tum_list("1 a.png\n0.5 b.png\n", "depth.txt"),
+                    EMF_CONTAINS("TumSequence::open: 'depth.txt' line 2: timestamp 0.5 is not after"));
+}
+
 TEST_CASE("read_tum_trajectory names file and line of a bad line", "[io][tum]") {
   ScratchDir dir;
   const std::string good = "# t tx ty tz qx qy qz qw\n0.1 0 0 0 0 0 0 1\n";

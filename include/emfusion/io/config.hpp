@@ -1,6 +1,7 @@
 // SystemParams by name: config files ("key = value" per line, '#' comments)
 // and command-line overrides ("key=value") set parameters by the names
 // listed in docs/parameters.md; run.json records every value used.
+// parse_config takes a config file's text in memory (as tests/fuzz/ does).
 #pragma once
 
 #include <charconv>
@@ -152,12 +153,12 @@ void apply_override(SystemParams<S>& params, const std::string& assignment) {
   set_parameter(params, assignment.substr(0, eq), assignment.substr(eq + 1));
 }
 
-/// Reads a config file: "key = value" per line, '#' comments, blank lines.
-/// Errors name the file, the line and the problem; the result is validated.
+/// read_config (below) of a config file's text in memory; `name` stands for
+/// the file in error messages ("read_config: '<name>' line 3: ...").
 template <class S>
-void read_config(const std::string& path, SystemParams<S>& params) {
+void parse_config(const std::string& text, const std::string& name, SystemParams<S>& params) {
   constexpr const char* where = "read_config";
-  const std::string text = detail::io::read_file(path, where);
+  const std::string& path = name;
   std::size_t pos = 0;
   for (int number = 1; pos <= text.size(); ++number) {
     std::size_t end = text.find('\n', pos);
@@ -190,6 +191,13 @@ void read_config(const std::string& path, SystemParams<S>& params) {
   } catch (const std::invalid_argument& e) {
     throw std::runtime_error(std::string(where) + ": " + detail::io::quoted(path) + ": " + e.what());
   }
+}
+
+/// Reads a config file: "key = value" per line, '#' comments, blank lines.
+/// Errors name the file, the line and the problem; the result is validated.
+template <class S>
+void read_config(const std::string& path, SystemParams<S>& params) {
+  parse_config(detail::io::read_file(path, "read_config"), path, params);
 }
 
 }  // namespace emfusion

@@ -14,6 +14,8 @@
 // naming the unsupported feature. Every offset and size in the file is
 // checked against the file's size before it is used.
 //
+// decode_exr reads a file's bytes in memory (tests/fuzz/ does).
+//
 // write_exr writes one FLOAT channel (default name "Z") with NONE, ZIPS or
 // ZIP compression, through "<path>.tmp" renamed over `path` when complete.
 //
@@ -183,18 +185,15 @@ inline void put_attribute(std::string& out, const char* name, const char* type, 
 
 }  // namespace detail::exr
 
-/// Reads a single-channel float image from an OpenEXR file (see the top of
-/// this header for what is supported). `channel` names the channel to read;
-/// empty chooses it as described there. Pixel (0, 0) is the data window's
-/// top-left corner.
-inline Image<float, Host> read_exr(const std::string& path, const std::string& channel = {}) {
+/// read_exr (below) of an OpenEXR file's `size` bytes in memory; `name`
+/// stands for the file in error messages ("read_exr: '<name>': ...").
+inline Image<float, Host> decode_exr(const void* data, std::size_t size, const std::string& name,
+                                     const std::string& channel = {}) {
   namespace exr = detail::exr;
   namespace bytes = detail::bytes;
   constexpr const char* where = "read_exr";
-  const std::string file = detail::io::read_file(path, where);
-  const auto* d = reinterpret_cast<const unsigned char*>(file.data());
-  const std::size_t size = file.size();
-  const detail::io::Failure bad{where, path};
+  const auto* d = static_cast<const unsigned char*>(data);
+  const detail::io::Failure bad{where, name};
   const auto str = [](auto value) { return std::to_string(value); };
 
   if (size < 8) bad("not an OpenEXR file (only " + str(size) + " bytes)");
@@ -370,6 +369,15 @@ inline Image<float, Host> read_exr(const std::string& path, const std::string& c
     }
   }
   return image;
+}
+
+/// Reads a single-channel float image from an OpenEXR file (see the top of
+/// this header for what is supported). `channel` names the channel to read;
+/// empty chooses it as described there. Pixel (0, 0) is the data window's
+/// top-left corner.
+inline Image<float, Host> read_exr(const std::string& path, const std::string& channel = {}) {
+  const std::string file = detail::io::read_file(path, "read_exr");
+  return decode_exr(file.data(), file.size(), path, channel);
 }
 
 /// Writes `image` as a single-part scanline OpenEXR file with one FLOAT

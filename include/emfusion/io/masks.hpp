@@ -14,6 +14,7 @@
 //
 // MaskDirectory::open reads and checks masks.txt at once (and that every
 // label image exists); label images are read only by read() / detect().
+// MaskDirectory::parse checks a masks.txt text in memory (tests/fuzz/).
 // Errors are std::runtime_error naming the function, the file and, for a bad
 // line, its number: "MaskDirectory::open: 'masks/masks.txt' line 4:
 // instance '0:cup:0.9': id '0' is not an integer in [1, 65535]"; bad
@@ -146,6 +147,12 @@ class MaskDirectory {
   /// (both 0: not checked).
   static MaskDirectory open(const std::string& dir, int width = 0, int height = 0);
 
+  /// open() of a masks.txt text in memory, as if read from <dir>/masks.txt,
+  /// without touching the file system: neither the directory nor the label
+  /// images are checked for existence (read() still reads them from `dir`).
+  /// Same checks of the text and the same errors, naming <dir>/masks.txt.
+  static MaskDirectory parse(const std::string& text, const std::string& dir, int width = 0, int height = 0);
+
   /// Number of entries (lines of masks.txt).
   std::size_t size() const { return entries_.size(); }
   /// Timestamp of entry i, seconds.
@@ -185,6 +192,12 @@ class MaskDirectory {
     int line = 0;
   };
 
+  /// Checks the expected size, then parses masks.txt's `text`; checks that
+  /// every label image exists when `check_files`.
+  static MaskDirectory parse_list(const std::string& text, const std::string& dir, int width, int height,
+                                  bool check_files);
+  static void check_size(const std::string& dir, int width, int height);
+
   const Entry& entry(std::size_t i, const char* where) const {
     if (i >= entries_.size())
       throw std::out_of_range(std::string(where) + ": entry " + std::to_string(i) + " out of range (" +
@@ -200,29 +213,45 @@ class MaskDirectory {
 
 static_assert(Segmenter<MaskDirectory>);
 
-inline MaskDirectory MaskDirectory::open(const std::string& dir, int width, int height) {
-  namespace tum = detail::tum;
-  namespace masks = detail::masks;
-  namespace fs = std::filesystem;
-  constexpr const char* where = "MaskDirectory::open";
+inline void MaskDirectory::check_size(const std::string& dir, int width, int height) {
   if (width < 0 || height < 0 || (width == 0) != (height == 0))
-    throw std::invalid_argument(std::string(where) + ": " + detail::io::quoted(dir) +
+    throw std::invalid_argument("MaskDirectory::open: " + detail::io::quoted(dir) +
                                 ": the expected label-image size must be two positive numbers or both 0 (not "
                                 "checked), got " +
                                 std::to_string(width) + "x" + std::to_string(height));
+}
+
+inline MaskDirectory MaskDirectory::open(const std::string& dir, int width, int height) {
+  namespace tum = detail::tum;
+  namespace fs = std::filesystem;
+  constexpr const char* where = "MaskDirectory::open";
+  check_size(dir, width, height);
   std::error_code ec;
   if (!fs::exists(dir, ec)) tum::fail(where, dir, "directory not found");
   if (!fs::is_directory(dir, ec)) tum::fail(where, dir, "not a directory");
+  const std::string list = tum::join(dir, "masks.txt");
+  if (!tum::is_file(list)) tum::fail(where, list, "not found (a mask directory lists its frames in masks.txt)");
+  return parse_list(tum::read_file(list, where), dir, width, height, /*check_files=*/true);
+}
 
+inline MaskDirectory MaskDirectory::parse(const std::string& text, const std::string& dir, int width, int height) {
+  check_size(dir, width, height);
+  return parse_list(text, dir, width, height, /*check_files=*/false);
+}
+
+inline MaskDirectory MaskDirectory::parse_list(const std::string& text, const std::string& dir, int width, int height,
+                                               bool check_files) {
+  namespace tum = detail::tum;
+  namespace masks = detail::masks;
+  constexpr const char* where = "MaskDirectory::open";
   MaskDirectory masks_dir;
   masks_dir.dir_ = dir;
   masks_dir.list_ = tum::join(dir, "masks.txt");
   masks_dir.width_ = width;
   masks_dir.height_ = height;
   const std::string& list = masks_dir.list_;
-  if (!tum::is_file(list)) tum::fail(where, list, "not found (a mask directory lists its frames in masks.txt)");
 
-  for (const tum::Line& line : tum::data_lines(tum::read_file(list, where))) {
+  for (const tum::Line& line : tum::data_lines(text)) {
     const tum::LineParser p(where, list, line);
     if (line.fields.size() < 2)
       p.fail("expected at least 2 fields (timestamp label_png [id:class:score ...]), got " +
@@ -248,7 +277,7 @@ inline MaskDirectory MaskDirectory::open(const std::string& dir, int width, int 
                  "' and '" + line.fields[k] + "')");
       e.instances.push_back(std::move(instance));
     }
-    if (!tum::is_file(e.path)) p.fail("label image " + detail::io::quoted(e.path) + " not found");
+    if (check_files && !tum::is_file(e.path)) p.fail("label image " + detail::io::quoted(e.path) + " not found");
     masks_dir.entries_.push_back(std::move(e));
   }
   return masks_dir;

@@ -10,6 +10,8 @@
 // rejects 16-bit ones rather than drop their low byte. Colour, palette and
 // alpha PNGs are rejected by these two: there is no silent conversion to gray.
 //
+// decode_png_u16 and decode_png_u8 do the same from bytes in memory.
+//
 // read_png_rgb (and decode_png_rgb, from bytes in memory) reads any 8-bit
 // (or 1/2/4-bit) PNG as colour: RGB as stored, palette entries looked up,
 // gray replicated to r = g = b (1/2/4-bit gray scaled to 0..255, so a 1-bit
@@ -228,17 +230,16 @@ inline void check_size(const Header& header, std::size_t file_size, const std::s
 /// Reads a grayscale PNG into an image of T (std::uint8_t or std::uint16_t).
 /// A 16-bit T also takes files of 8 bits or fewer when `allow_narrower`,
 /// values unchanged.
+/// The `size` bytes at `data` are the PNG; `path` names it in messages.
 template <class T>
-Image<T, Host> read_gray(const std::string& path, bool allow_narrower) {
+Image<T, Host> read_gray(const unsigned char* data, std::size_t size, const std::string& path, bool allow_narrower) {
   static_assert(std::is_same_v<T, std::uint8_t> || std::is_same_v<T, std::uint16_t>);
   constexpr const char* where = "read_png";
   constexpr int target_bits = 8 * int(sizeof(T));
 
-  const std::string file = io::read_file(path, where);
-  const std::string_view bytes = file;
   Context context;
   ReadStructs s;
-  start_read(reinterpret_cast<const unsigned char*>(file.data()), file.size(), path, context, s);
+  start_read(data, size, path, context, s);
 
   const auto corrupt = [&] { fail(where, path, std::string("corrupt or truncated PNG: ") + context.message); };
   Header header;
@@ -262,7 +263,7 @@ Image<T, Host> read_gray(const std::string& path, bool allow_narrower) {
   if (header.row_bytes != width * sample_bytes)
     fail(where, path,
          "unexpected decoded row size " + std::to_string(header.row_bytes) + " for width " + std::to_string(width));
-  check_size(header, bytes.size(), path);
+  check_size(header, size, path);
 
   Image<T, Host> image(static_cast<int>(width), static_cast<int>(height));
   T* pixels = image.view().data;
@@ -275,6 +276,12 @@ Image<T, Host> read_gray(const std::string& path, bool allow_narrower) {
   if (widen)
     for (std::size_t i = 0; i < narrow.size(); ++i) pixels[i] = T(narrow[i]);
   return image;
+}
+
+template <class T>
+Image<T, Host> read_gray(const std::string& path, bool allow_narrower) {
+  const std::string file = io::read_file(path, "read_png");
+  return read_gray<T>(reinterpret_cast<const unsigned char*>(file.data()), file.size(), path, allow_narrower);
 }
 
 /// Reads the `size` bytes at `data`, a PNG of 8 bits or fewer per sample,
@@ -347,6 +354,17 @@ inline Image<std::uint16_t, Host> read_png_u16(const std::string& path) {
 /// is an error.
 inline Image<std::uint8_t, Host> read_png_u8(const std::string& path) {
   return detail::png::read_gray<std::uint8_t>(path, /*allow_narrower=*/true);
+}
+
+/// read_png_u16 and read_png_u8 of a PNG file's `size` bytes in memory;
+/// `name` stands for the file in error messages.
+inline Image<std::uint16_t, Host> decode_png_u16(const void* data, std::size_t size, const std::string& name) {
+  return detail::png::read_gray<std::uint16_t>(static_cast<const unsigned char*>(data), size, name,
+                                               /*allow_narrower=*/true);
+}
+inline Image<std::uint8_t, Host> decode_png_u8(const void* data, std::size_t size, const std::string& name) {
+  return detail::png::read_gray<std::uint8_t>(static_cast<const unsigned char*>(data), size, name,
+                                              /*allow_narrower=*/true);
 }
 
 /// Reads an 8-bit (or 1/2/4-bit) PNG of any colour type as RGB: palette

@@ -7,6 +7,11 @@
 // and spaces, tabs or commas between fields, as the TUM benchmark's own
 // scripts do. Paths in lists cannot contain spaces.
 //
+// The readers also take text in memory (parse_tum_trajectory,
+// parse_calibration, parse_tum_list; format_tum_trajectory is the writer's
+// text), with a name standing for the file in messages: the fuzz targets of
+// tests/fuzz/ call them without touching the file system.
+//
 // Errors are std::runtime_error naming the function, the file and, for a bad
 // line, its number: "read_tum_trajectory: 'gt.txt' line 7: expected 8
 // fields ..."; bad arguments (options, poses to write) are
@@ -146,8 +151,9 @@ class LineParser {
   const Line& line_;
 };
 
-inline std::vector<TimedPose> read_trajectory(const std::string& path, const char* where) {
-  const std::vector<Line> lines = data_lines(read_file(path, where));
+/// The poses of a trajectory file's text; `path` names it in messages.
+inline std::vector<TimedPose> parse_trajectory(const std::string& text, const std::string& path, const char* where) {
+  const std::vector<Line> lines = data_lines(text);
   std::vector<TimedPose> poses;
   poses.reserve(lines.size());
   int previous_line = 0;
@@ -168,6 +174,10 @@ inline std::vector<TimedPose> read_trajectory(const std::string& path, const cha
   return poses;
 }
 
+inline std::vector<TimedPose> read_trajectory(const std::string& path, const char* where) {
+  return parse_trajectory(read_file(path, where), path, where);
+}
+
 /// Appends `value` with `decimals` digits after the point ("%.*f").
 inline void append_fixed(std::string& out, double value, int decimals) {
   char buffer[512];  // %f of the largest double needs about 320 characters
@@ -182,18 +192,24 @@ inline void write_text(const std::string& path, const std::string& text, const c
   file.commit(written ? "" : io::errno_text(errno));
 }
 
-/// One entry of rgb.txt, depth.txt or associations.txt.
-struct ListEntry {
+}  // namespace detail::tum
+
+/// One entry of rgb.txt or depth.txt (parse_tum_list).
+struct TumListEntry {
   double timestamp = 0;
   std::string path;  // as written in the list, relative to the sequence directory
-  int line = 0;
+  int line = 0;      // its line number, from 1
 };
 
-/// Reads "timestamp path" lines (rgb.txt, depth.txt), timestamps strictly
-/// increasing.
-inline std::vector<ListEntry> read_list(const std::string& path, const char* where) {
+namespace detail::tum {
+
+using ListEntry = TumListEntry;
+
+/// The entries of a "timestamp path" list's text (rgb.txt, depth.txt),
+/// timestamps strictly increasing; `path` names it in messages.
+inline std::vector<ListEntry> parse_list(const std::string& text, const std::string& path, const char* where) {
   std::vector<ListEntry> entries;
-  for (const Line& line : data_lines(read_file(path, where))) {
+  for (const Line& line : data_lines(text)) {
     const LineParser p(where, path, line);
     p.expect_fields(2, "timestamp path");
     const double t = p.number(0, "timestamp");
@@ -203,6 +219,12 @@ inline std::vector<ListEntry> read_list(const std::string& path, const char* whe
     entries.push_back({t, line.fields[1], line.number});
   }
   return entries;
+}
+
+/// Reads "timestamp path" lines (rgb.txt, depth.txt), timestamps strictly
+/// increasing.
+inline std::vector<ListEntry> read_list(const std::string& path, const char* where) {
+  return parse_list(read_file(path, where), path, where);
 }
 
 }  // namespace detail::tum
@@ -215,13 +237,26 @@ inline std::vector<TimedPose> read_tum_trajectory(const std::string& path) {
   return detail::tum::read_trajectory(path, "read_tum_trajectory");
 }
 
-/// Writes a TUM trajectory file (a "# timestamp tx ty tz qx qy qz qw" comment,
-/// then one pose per line: timestamp with 6 decimals, translation and
-/// quaternion with 9, quaternion w >= 0), via "<path>.tmp" and a rename.
-/// Throws std::invalid_argument, writing nothing, if a value is not finite
-/// or the timestamps, as written with 6 decimals, do not increase strictly.
-inline void write_tum_trajectory(const std::string& path, const std::vector<TimedPose>& poses) {
+/// read_tum_trajectory of a file's text in memory; `name` stands for the
+/// file in error messages ("read_tum_trajectory: '<name>' line 7: ...").
+inline std::vector<TimedPose> parse_tum_trajectory(const std::string& text, const std::string& name) {
+  return detail::tum::parse_trajectory(text, name, "read_tum_trajectory");
+}
+
+/// The "timestamp path" entries of an rgb.txt or depth.txt file's text in
+/// memory, as TumSequence::open reads them: timestamps finite and strictly
+/// increasing, exactly two fields per data line. Errors are
+/// std::runtime_error "TumSequence::open: '<name>' line 3: ...".
+inline std::vector<TumListEntry> parse_tum_list(const std::string& text, const std::string& name) {
+  return detail::tum::parse_list(text, name, "TumSequence::open");
+}
+
+/// The text that write_tum_trajectory (below) writes for `poses`, in memory;
+/// `name` stands for the file in messages (same checks, same
+/// std::invalid_argument).
+inline std::string format_tum_trajectory(const std::vector<TimedPose>& poses, const std::string& name) {
   namespace tum = detail::tum;
+  const std::string& path = name;
   constexpr const char* where = "write_tum_trajectory";
   std::string text = "# timestamp tx ty tz qx qy qz qw\n";
   std::string previous_text;
@@ -259,16 +294,25 @@ inline void write_tum_trajectory(const std::string& path, const std::vector<Time
     }
     text.push_back('\n');
   }
-  tum::write_text(path, text, where);
+  return text;
 }
 
-/// Reads a calibration file: one line "fx fy cx cy width height" (comments
-/// allowed). fx and fy must be positive, width and height positive integers;
-/// cx and cy any finite value.
-inline PinholeCamera<double> read_calibration(const std::string& path) {
+/// Writes a TUM trajectory file (a "# timestamp tx ty tz qx qy qz qw" comment,
+/// then one pose per line: timestamp with 6 decimals, translation and
+/// quaternion with 9, quaternion w >= 0), via "<path>.tmp" and a rename.
+/// Throws std::invalid_argument, writing nothing, if a value is not finite
+/// or the timestamps, as written with 6 decimals, do not increase strictly.
+inline void write_tum_trajectory(const std::string& path, const std::vector<TimedPose>& poses) {
+  detail::tum::write_text(path, format_tum_trajectory(poses, path), "write_tum_trajectory");
+}
+
+/// read_calibration (below) of a file's text in memory; `name` stands for the file
+/// in error messages ("read_calibration: '<name>' line 2: ...").
+inline PinholeCamera<double> parse_calibration(const std::string& text, const std::string& name) {
   namespace tum = detail::tum;
+  const std::string& path = name;
   constexpr const char* where = "read_calibration";
-  const std::vector<tum::Line> lines = tum::data_lines(tum::read_file(path, where));
+  const std::vector<tum::Line> lines = tum::data_lines(text);
   if (lines.empty()) tum::fail(where, path, "no calibration line (fx fy cx cy width height)");
   if (lines.size() > 1)
     tum::fail_at(where, path, lines[1].number,
@@ -285,6 +329,13 @@ inline PinholeCamera<double> read_calibration(const std::string& path) {
   if (!(camera.fx > 0)) p.fail("fx " + lines[0].fields[0] + " is not positive");
   if (!(camera.fy > 0)) p.fail("fy " + lines[0].fields[1] + " is not positive");
   return camera;
+}
+
+/// Reads a calibration file: one line "fx fy cx cy width height" (comments
+/// allowed). fx and fy must be positive, width and height positive integers;
+/// cx and cy any finite value.
+inline PinholeCamera<double> read_calibration(const std::string& path) {
+  return parse_calibration(detail::tum::read_file(path, "read_calibration"), path);
 }
 
 /// Options of TumSequence::open.
