@@ -32,6 +32,25 @@ TEST_CASE("Config files and overrides set parameters by name", "[io]") {
   for (const auto& e : parameter_table<float>()) CHECK(e.get(q) == e.get(p));
 }
 
+TEST_CASE("static_classes and float parameters read back as they print", "[io]") {
+  // Both found by tests/fuzz/fuzz_config.cpp: "a, b" kept the blank in " b"
+  // (which no class name matches), and 1e300 became an infinite float that
+  // validated but printed as "inf", which no config file can set.
+  SystemParams<float> p;
+  apply_override(p, "static_classes=person, dining_table ,,tv");
+  CHECK(p.static_classes == std::vector<std::string>{"person", "dining_table", "tv"});
+  apply_override(p, "static_classes= none");
+  CHECK(p.static_classes.empty());
+  apply_override(p, "static_classes=none,");
+  CHECK(p.static_classes.empty());
+  for (const auto& e : parameter_table<float>())
+    if (std::string(e.name) == "static_classes") CHECK(e.get(p) == "none");
+  CHECK_THROWS_WITH(apply_override(p, "sigma=1e300"), EMF_CONTAINS("sigma: '1e300' is out of range"));
+  SystemParams<double> d;
+  apply_override(d, "sigma=1e300");  // a double holds it (validation is read_config's business)
+  CHECK(d.likelihood.sigma == 1e300);
+}
+
 TEST_CASE("Bad config files name the file, the line and the problem", "[io]") {
   ScratchDir dir;
   SystemParams<float> p;

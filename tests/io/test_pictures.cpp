@@ -78,12 +78,13 @@ ColourImage random_colour(int width, int height, unsigned seed) {
 /// (big-endian 16-bit samples). Returns false if libpng failed.
 bool write_raw_png_stage(std::FILE* file, png_structp png, png_infop info, int width, int height, int bit_depth,
                          int colour_type, const unsigned char* rows, std::size_t row_bytes, const png_color* palette,
-                         int palette_size) {
+                         int palette_size, const unsigned char* transparency, int transparency_size) {
   if (setjmp(png_jmpbuf(png))) return false;
   png_init_io(png, file);
   png_set_IHDR(png, info, png_uint_32(width), png_uint_32(height), bit_depth, colour_type, PNG_INTERLACE_NONE,
                PNG_COMPRESSION_TYPE_DEFAULT, PNG_FILTER_TYPE_DEFAULT);
   if (palette) png_set_PLTE(png, info, palette, palette_size);
+  if (transparency) png_set_tRNS(png, info, transparency, transparency_size, nullptr);
   png_write_info(png, info);
   for (int y = 0; y < height; ++y) png_write_row(png, rows + std::size_t(y) * row_bytes);
   png_write_end(png, nullptr);
@@ -91,14 +92,16 @@ bool write_raw_png_stage(std::FILE* file, png_structp png, png_infop info, int w
 }
 
 void write_raw_png(const std::string& path, int width, int height, int bit_depth, int colour_type,
-                   const std::vector<unsigned char>& rows, const std::vector<png_color>& palette = {}) {
+                   const std::vector<unsigned char>& rows, const std::vector<png_color>& palette = {},
+                   const std::vector<unsigned char>& palette_alpha = {}) {
   std::FILE* file = std::fopen(path.c_str(), "wb");
   REQUIRE(file);
   png_structp png = png_create_write_struct(PNG_LIBPNG_VER_STRING, nullptr, nullptr, nullptr);
   png_infop info = png_create_info_struct(png);
   const bool ok = write_raw_png_stage(file, png, info, width, height, bit_depth, colour_type, rows.data(),
                                       rows.size() / std::size_t(height), palette.empty() ? nullptr : palette.data(),
-                                      int(palette.size()));
+                                      int(palette.size()), palette_alpha.empty() ? nullptr : palette_alpha.data(),
+                                      int(palette_alpha.size()));
   png_destroy_write_struct(&png, &info);
   std::fclose(file);
   REQUIRE(ok);
@@ -236,6 +239,13 @@ TEST_CASE("read_png_rgb converts gray, palette and alpha PNGs to RGB; the gray r
     write_raw_png(dir.file("p.png"), 3, 1, 8, PNG_COLOR_TYPE_PALETTE, {1, 0, 1}, palette);
     CHECK(read_png_rgb(dir.file("p.png")).to_host() == std::vector<Rgb8>{{200, 100, 50}, {10, 20, 30}, {200, 100, 50}});
     CHECK_THROWS_WITH(read_png_u8(dir.file("p.png")), EMF_CONTAINS("expected a single-channel"));
+  }
+  SECTION("a palette with tRNS transparency: entries looked up, transparency dropped") {
+    // libpng expands a palette's tRNS to alpha; the reader failed on the
+    // 4-byte rows until it stripped that alpha too (found by tests/fuzz).
+    const std::vector<png_color> palette = {{10, 20, 30}, {200, 100, 50}};
+    write_raw_png(dir.file("pt.png"), 3, 1, 8, PNG_COLOR_TYPE_PALETTE, {1, 0, 1}, palette, {0, 128});
+    CHECK(read_png_rgb(dir.file("pt.png")).to_host() == std::vector<Rgb8>{{200, 100, 50}, {10, 20, 30}, {200, 100, 50}});
   }
   SECTION("RGBA and gray+alpha: alpha dropped, colour kept as stored") {
     write_raw_png(dir.file("a.png"), 2, 1, 8, PNG_COLOR_TYPE_RGB_ALPHA, {1, 2, 3, 0, 250, 251, 252, 128});

@@ -166,6 +166,18 @@ TEST_CASE("read_tum_trajectory takes comments, blank lines, tabs, commas and CRL
   CHECK(read_tum_trajectory(dir.write("empty.txt", "# nothing yet\n")).empty());
 }
 
+TEST_CASE("read_tum_trajectory normalises quaternions of any scale", "[io][tum]") {
+  // Components near 1e200 overflowed the norm to infinity, and the pose
+  // read as the identity (found by tests/fuzz/fuzz_tum_trajectory.cpp).
+  const auto poses = parse_tum_trajectory("1 0 0 0 0 0 2e200 2e200\n2 0 0 0 -1e300 0 0 0\n", "big.txt");
+  REQUIRE(poses.size() == 2);
+  CHECK(poses[0].pose.rotation()(0, 1) == Approx(-1.0).margin(1e-12));  // 90 degrees about z
+  CHECK(poses[0].pose.rotation()(1, 0) == Approx(1.0).margin(1e-12));
+  CHECK(poses[1].pose.rotation()(1, 1) == Approx(-1.0).margin(1e-12));  // 180 degrees about x
+  CHECK(poses[1].pose.rotation()(2, 2) == Approx(-1.0).margin(1e-12));
+  CHECK_THROWS_WITH(parse_tum_trajectory("1 0 0 0 0 0 1e-7 1e-7\n", "small.txt"), EMF_CONTAINS("zero norm"));
+}
+
 TEST_CASE("The TUM readers take text in memory, naming it in messages", "[io][tum]") {
   ScratchDir dir;
   const std::vector<TimedPose> poses = parse_tum_trajectory("0.5 1 2 3 0 0 0 1\n0.75 0 0 0 1 0 0 0\n", "gt");

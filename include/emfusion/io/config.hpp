@@ -7,6 +7,7 @@
 #include <charconv>
 #include <cmath>
 #include <functional>
+#include <limits>
 #include <string>
 #include <vector>
 
@@ -36,6 +37,16 @@ inline double to_number(const std::string& text, const char* name) {
     throw std::invalid_argument(std::string(name) + ": '" + text + "' is not a number");
   return v;
 }
+/// A number for a field of type T: one beyond T's range (1e39 for a float)
+/// is an error, not infinity.
+template <class T>
+T to_scalar(const std::string& text, const char* name) {
+  const double v = to_number(text, name);
+  if (std::fabs(v) > double(std::numeric_limits<T>::max()))
+    throw std::invalid_argument(std::string(name) + ": '" + text + "' is out of range (larger than " +
+                                detail::tum::format(double(std::numeric_limits<T>::max())) + ")");
+  return T(v);
+}
 inline int to_integer(const std::string& text, const char* name) {
   const double v = to_number(text, name);
   if (v != std::floor(v) || std::fabs(v) > 1e9)
@@ -58,7 +69,7 @@ const std::vector<ParameterEntry<S>>& parameter_table() {
   using namespace detail::config;
 #define EMF_NUMBER(name, field, meaning)                                                          \
   ParameterEntry<S> {                                                                             \
-    name, meaning, [](P& p, const std::string& v) { p.field = decltype(p.field)(to_number(v, name)); }, \
+    name, meaning, [](P& p, const std::string& v) { p.field = to_scalar<decltype(p.field)>(v, name); }, \
         [](const P& p) { return print(double(p.field)); }                                         \
   }
 #define EMF_INTEGER(name, field, meaning)                                                                       \
@@ -113,13 +124,23 @@ const std::vector<ParameterEntry<S>>& parameter_table() {
       EMF_BOOL("use_association", use_association, "ablation switch: association likelihoods"),
       EMF_BOOL("use_map_confidence", use_map_confidence, "ablation switch: map confidence weights"),
       ParameterEntry<S>{"static_classes", "classes never made objects (comma-separated, or 'none')",
+                        // White space around a name is not part of it ("bed, oven" is bed
+                        // and oven: class names hold none); empty names and "none" are skipped,
+                        // so that what prints reads back as the same list.
                         [](P& p, const std::string& v) {
                           p.static_classes.clear();
-                          if (v == "none") return;
                           std::size_t pos = 0;
                           while (pos <= v.size()) {
                             const std::size_t end = std::min(v.find(',', pos), v.size());
-                            if (end > pos) p.static_classes.push_back(v.substr(pos, end - pos));
+                            const auto blank = [&](std::size_t k) {
+                              return v[k] == ' ' || v[k] == '\t' || v[k] == '\r' || v[k] == '\n' || v[k] == '\v' ||
+                                     v[k] == '\f';
+                            };
+                            std::size_t first = pos, last = end;
+                            while (first < last && blank(first)) ++first;
+                            while (last > first && blank(last - 1)) --last;
+                            const std::string name = v.substr(first, last - first);
+                            if (!name.empty() && name != "none") p.static_classes.push_back(name);
                             pos = end + 1;
                           }
                         },

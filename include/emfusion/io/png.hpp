@@ -119,8 +119,9 @@ inline bool read_header(png_structp png, png_infop info, Header* header) {
 
 /// Reads the header and, for files of 8 bits or fewer, sets up the
 /// transformations to 8-bit RGB: palette to RGB, 1/2/4-bit gray scaled to
-/// 8 bits, gray to RGB, alpha stripped (tRNS is ignored: it is not expanded
-/// to alpha). 16-bit files get no transformation; the caller rejects them.
+/// 8 bits, gray to RGB, alpha stripped (tRNS is ignored: libpng expands it
+/// to alpha along with a palette, and that alpha is stripped too). 16-bit
+/// files get no transformation; the caller rejects them.
 inline bool read_header_rgb(png_structp png, png_infop info, Header* header) {
   if (setjmp(png_jmpbuf(png))) return false;
   png_read_info(png, info);
@@ -131,7 +132,9 @@ inline bool read_header_rgb(png_structp png, png_infop info, Header* header) {
   if (header->color_type == PNG_COLOR_TYPE_GRAY && header->bit_depth < 8) png_set_expand_gray_1_2_4_to_8(png);
   if (header->color_type == PNG_COLOR_TYPE_GRAY || header->color_type == PNG_COLOR_TYPE_GRAY_ALPHA)
     png_set_gray_to_rgb(png);
-  if (header->color_type & PNG_COLOR_MASK_ALPHA) png_set_strip_alpha(png);
+  if ((header->color_type & PNG_COLOR_MASK_ALPHA) ||
+      (header->color_type == PNG_COLOR_TYPE_PALETTE && png_get_valid(png, info, PNG_INFO_tRNS)))
+    png_set_strip_alpha(png);
   png_set_interlace_handling(png);
   png_read_update_info(png, info);
   header->row_bytes = png_get_rowbytes(png, info);

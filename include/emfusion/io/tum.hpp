@@ -163,7 +163,13 @@ inline std::vector<TimedPose> parse_trajectory(const std::string& text, const st
     static constexpr const char* names[8] = {"timestamp", "tx", "ty", "tz", "qx", "qy", "qz", "qw"};
     double v[8];
     for (std::size_t k = 0; k < 8; ++k) v[k] = p.number(k, names[k]);
-    const double norm = std::sqrt(v[4] * v[4] + v[5] * v[5] + v[6] * v[6] + v[7] * v[7]);
+    // Scaled by the largest component first: the squares of components
+    // near 1e200 would overflow the norm to infinity (and normalising by it
+    // would give the identity rotation instead of the one written).
+    const double largest = std::max({std::fabs(v[4]), std::fabs(v[5]), std::fabs(v[6]), std::fabs(v[7])});
+    if (largest > 0)
+      for (std::size_t k = 4; k < 8; ++k) v[k] /= largest;
+    const double norm = largest * std::sqrt(v[4] * v[4] + v[5] * v[5] + v[6] * v[6] + v[7] * v[7]);
     if (norm < 1e-6) p.fail("the quaternion (qx qy qz qw) has zero norm");
     if (!poses.empty() && !(v[0] > poses.back().timestamp))
       p.fail("timestamp " + line.fields[0] + " is not after the previous one (" + format(poses.back().timestamp) +
