@@ -109,9 +109,16 @@ class ObjectModel {
     const Vec3i old_dims = volume_.dims();
     const S s = volume_.voxel_size();
     Vec3i below{{0, 0, 0}}, dims = old_dims;
+    // Voxels to add below and above, clamped to the cap before the
+    // conversion: a box from absurd points (1e30 m, inf) must not overflow
+    // an int; NaN adds nothing.
+    const auto voxels_to_add = [&](S metres) {
+      const S v = std::ceil(metres / s);
+      return v > S(0) ? int(std::min(double(v), double(max_voxels))) : 0;
+    };
     for (int a = 0; a < 3; ++a) {
-      int add_lo = std::max(0, int(std::ceil(-lo[a] / s)));
-      int add_hi = std::max(0, int(std::ceil((hi[a] - S(old_dims[a]) * s) / s)));
+      int add_lo = voxels_to_add(-lo[a]);
+      int add_hi = voxels_to_add(hi[a] - S(old_dims[a]) * s);
       // Within the cap, keep what can be kept: split the room between both sides.
       const int room = std::max(0, max_voxels - old_dims[a]);
       if (add_lo + add_hi > room) {
