@@ -3,6 +3,7 @@
 // (shared/PARAMETERS.md; docs/parameters.md explains each one).
 #pragma once
 
+#include <numbers>
 #include <string>
 #include <vector>
 
@@ -15,10 +16,30 @@
 
 namespace emfusion {
 
+/// The largest motion a pose may make from one frame to the next; a solved
+/// pose that moves further is refused and the previous one kept (hostile
+/// input: a frame of another scene, a solve that ran away). Infinity turns a
+/// bound off.
+template <class S>
+struct MotionBound {
+  S translation = S(0.3);       ///< metres per frame
+  S rotation_degrees = S(30);   ///< degrees per frame
+
+  /// True if moving `translation_m` metres and `rotation_rad` radians exceeds the bound.
+  bool exceeded_by(double translation_m, double rotation_rad) const {
+    const double degrees = rotation_rad * (180.0 / std::numbers::pi);
+    return !(translation_m <= double(translation)) || !(degrees <= double(rotation_degrees));
+  }
+};
+
 template <class S>
 struct SystemParams {
   // Preprocessing.
   BilateralParams<S> bilateral{};
+  /// Metres: depth beyond this is no measurement (like 0, NaN, inf or a
+  /// negative value), so that sensor garbage never carves the map; 0 = no
+  /// limit. Structured-light sensors stop well before 10 m.
+  S max_depth = S(10);
 
   // Background volume: a cube of background_voxels^3, camera at the centre
   // of one face in the first frame.
@@ -43,6 +64,13 @@ struct SystemParams {
   S depth_noise_reference = S(0);
   /// An object whose alignment has fewer terms keeps its previous pose.
   int min_object_terms = 100;
+  /// Camera tracking with fewer terms keeps the previous pose and the frame
+  /// is not mapped; a frame with fewer valid depth pixels does not start the map.
+  int min_camera_terms = 100;
+  /// Per-frame bounds on the camera's and every object's motion: a solve
+  /// that moves further is refused (FrameResult reports jump_rejected).
+  MotionBound<S> max_camera_motion{};
+  MotionBound<S> max_object_motion{};
 
   // Association (eq. 5/7).
   LikelihoodParams<S> likelihood{};
@@ -96,6 +124,12 @@ struct SystemParams {
     detail::require(object_padding >= S(1), w, "object_padding must be at least 1");
     detail::require(object_depth_gap > S(0), w, "object_depth_gap must be positive");
     detail::require(max_objects >= 0 && max_objects <= 256, w, "max_objects must be in 0..256");
+    detail::require(max_depth >= S(0), w, "max_depth must not be negative (0 = no limit)");
+    detail::require(min_camera_terms >= 0 && min_object_terms >= 0, w,
+                    "min_camera_terms and min_object_terms must not be negative");
+    detail::require(max_camera_motion.translation > S(0) && max_camera_motion.rotation_degrees > S(0) &&
+                        max_object_motion.translation > S(0) && max_object_motion.rotation_degrees > S(0),
+                    w, "motion bounds must be positive (infinity: no bound)");
     detail::require(huber_voxels > S(0), w, "huber_voxels must be positive");
     detail::require(pixel_stride >= 1, w, "pixel_stride must be at least 1");
     detail::require(depth_noise_reference >= S(0), w, "depth_noise_reference must not be negative");

@@ -79,9 +79,56 @@ struct ObjectRecord {
   Trajectory trajectory;   ///< T_world_object per frame it existed
 };
 
-/// What the deletion rules saw of one object in a frame.
+/// What tracking did with a pose in one frame: the camera's
+/// (FrameResult::camera_tracking) or an object's (ObjectStatus::tracking).
+/// Every outcome but `tracked` leaves the previous pose in place.
+enum class TrackingOutcome {
+  /// No solve: a frame before or starting the map, an object created this
+  /// frame, or the objects of a frame whose camera was not tracked.
+  not_tracked,
+  tracked,        ///< the solved pose was accepted
+  too_few_terms,  ///< too few measurements met the model (no valid depth, out of view, outside the volume)
+  solve_failed,   ///< no solution: non-finite or singular normal equations, or a non-finite pose
+  jump_rejected,  ///< moved further than the per-frame bound (max_camera_motion, max_object_motion)
+};
+
+inline const char* to_string(TrackingOutcome t) {
+  switch (t) {
+    case TrackingOutcome::not_tracked: return "not_tracked";
+    case TrackingOutcome::tracked: return "tracked";
+    case TrackingOutcome::too_few_terms: return "too_few_terms";
+    case TrackingOutcome::solve_failed: return "solve_failed";
+    case TrackingOutcome::jump_rejected: return "jump_rejected";
+  }
+  return "unknown";
+}
+
+/// How far a solve moved a pose from the previous frame's, whether or not
+/// the move was accepted.
+struct PoseStep {
+  double translation = 0;  ///< metres
+  double rotation = 0;     ///< radians
+};
+
+/// The pixels of the depth image a frame received, by kind. Only `valid`
+/// pixels are measurements; every other kind is treated as a hole (0).
+struct DepthCounts {
+  int valid = 0;         ///< finite, positive and within SystemParams::max_depth
+  int missing = 0;       ///< 0: no measurement
+  int not_finite = 0;    ///< NaN, +inf or -inf
+  int negative = 0;      ///< finite and below 0
+  int beyond_range = 0;  ///< finite and beyond SystemParams::max_depth (when it is set)
+  EMF_HD DepthCounts operator+(const DepthCounts& o) const {
+    return {valid + o.valid, missing + o.missing, not_finite + o.not_finite, negative + o.negative,
+            beyond_range + o.beyond_range};
+  }
+};
+
+/// What the deletion rules saw of one object in a frame, and what tracking did with it.
 struct ObjectStatus {
   int id = 0;
+  TrackingOutcome tracking = TrackingOutcome::not_tracked;
+  PoseStep step;                  ///< the motion its solve proposed (world frame, object origin)
   int rendered_pixels = 0;        ///< rendered pixels inside the visibility border
   int associated_pixels = 0;      ///< pixels inside the border whose association to it exceeds 0.5
   int visible_pixels = 0;         ///< the larger of the two: what the visibility rule compares
@@ -93,10 +140,20 @@ struct ObjectStatus {
 struct FrameResult {
   int frame = 0;
   double timestamp = 0;
-  SolveReport camera;                   ///< background tracking (empty on the first frame)
+  DepthCounts depth;                    ///< the received depth's pixels by kind
+  SolveReport camera;                   ///< background tracking (empty before the map starts)
+  TrackingOutcome camera_tracking = TrackingOutcome::not_tracked;
+  PoseStep camera_step;                 ///< the motion the camera's solve proposed (also when refused)
+  /// The frame entered the map: integration, foreground counts, detection
+  /// handling and the deletion rules ran. False when the camera was not
+  /// tracked, or before the map started (the first frame with at least
+  /// SystemParams::min_camera_terms valid depth pixels starts it).
+  bool mapped = false;
   std::vector<SolveReport> objects;     ///< per live object tracked, in objects() order before changes
-  bool detector_frame = false;
-  int detections = 0, matched = 0;
+  bool detector_frame = false;          ///< the detector ran (its result is used only when `mapped`)
+  int detections = 0, matched = 0;      ///< instances received; detections matched to objects
+  int invalid_detections = 0;           ///< instances ignored: label outside 1..65535 or repeated, score not finite
+  int detections_over_cap = 0;          ///< unmatched detections not considered: max_objects objects were live
   std::vector<int> created, deleted;    ///< object ids
   std::vector<ObjectStatus> object_status;  ///< objects that existed before this frame, in objects() order
   int live_objects = 0;
@@ -104,6 +161,68 @@ struct FrameResult {
 };
 
 namespace detail::system {
+
+/// The kind of each received depth pixel (DepthCounts).
+template <class S>
+struct ClassifyDepth {
+  ImageView<const S> depth;
+  S max_depth;  // 0: no limit
+  EMF_HD DepthCounts operator()(int i) const {
+    const S d = depth[i];
+    DepthCounts c;
+    if (d == S(0)) c.missing = 1;
+    else if (!std::isfinite(d)) c.not_finite = 1;
+    else if (d < S(0)) c.negative = 1;
+    else if (max_depth > S(0) && d > max_depth) c.beyond_range = 1;
+    else c.valid = 1;
+    return c;
+  }
+};
+
+struct AddDepthCounts {
+  EMF_HD DepthCounts operator()(const DepthCounts& a, const DepthCounts& b) const { return a + b; }
+};
+
+/// Copies the measurements of a depth image and turns everything else
+/// (non-finite, not positive, beyond max_depth) into holes.
+template <class S>
+struct SanitizeDepth {
+  ImageView<const S> in;
+  ImageView<S> out;
+  S max_depth;  // 0: no limit
+  EMF_HD void operator()(int i) const {
+    const S d = in[i];
+    out[i] = is_valid_depth(d) && (max_depth <= S(0) || d <= max_depth) ? d : S(0);
+  }
+};
+
+/// How far `to` lies from `from`: translation and rotation angle.
+template <class S>
+PoseStep step_between(const SE3<S>& from, const SE3<S>& to) {
+  const SE3<double> d = from.template cast<double>().inverse() * to.template cast<double>();
+  return {double(norm(d.translation())), double(norm(so3_log(d.rotation())))};
+}
+
+template <class S>
+bool is_finite(const SE3<S>& T) {
+  const auto m = T.matrix();
+  for (int r = 0; r < 3; ++r)
+    for (int c = 0; c < 4; ++c)
+      if (!std::isfinite(double(m(r, c)))) return false;
+  return true;
+}
+
+/// The outcome of a solve that proposed `T_new`: accepted only if it found a
+/// solution with at least `min_terms` terms that moves less than `bound`.
+template <class S>
+TrackingOutcome tracking_outcome(const SolveReport& r, double min_terms, const SE3<S>& T_new, const PoseStep& step,
+                                 const MotionBound<S>& bound) {
+  if (r.reason == StopReason::too_few_terms) return TrackingOutcome::too_few_terms;
+  if (!r.converged() || !is_finite(T_new)) return TrackingOutcome::solve_failed;
+  if (r.terms < min_terms) return TrackingOutcome::too_few_terms;
+  if (bound.exceeded_by(step.translation, step.rotation)) return TrackingOutcome::jump_rejected;
+  return TrackingOutcome::tracked;
+}
 
 /// Ablation weights: the foreground probability of the pixel's point inside
 /// an object's volume, 0 outside it.
@@ -205,42 +324,62 @@ class System {
     camera_.validate("System");  // the parameters were validated by background_geometry
   }
 
-  /// Processes one depth frame (metres, 0 = invalid, camera size) with the
-  /// detector's result for it, if the detector ran.
+  /// Processes one depth frame (metres, camera size) with the detector's
+  /// result for it, if the detector ran. Pixels that are 0, NaN, infinite,
+  /// negative or beyond SystemParams::max_depth are holes. A frame whose
+  /// camera cannot be tracked (too few terms, a failed solve, a jump beyond
+  /// max_camera_motion) keeps the previous poses and is not mapped; the
+  /// result says which (docs/system.md, "Hostile input").
   FrameResult process(const Image<S, B>& depth, double timestamp, const Detections* detections = nullptr) {
     detail::require_image(depth.view(), camera_.width, camera_.height, "System::process", "depth image");
     FrameResult result;
     result.frame = frame_;
     result.timestamp = timestamp;
+    result.detector_frame = detections != nullptr;
+    result.detections = detections ? int(detections->instances.size()) : 0;
     Clock clock(backend_);
 
-    bilateral_filter(depth, filtered_, params_.bilateral);
+    result.depth = sanitize_depth(depth);
+    bilateral_filter(depth_, filtered_, params_.bilateral);
     back_project(filtered_, camera_, points_);
     result.times.preprocess = clock.lap();
 
-    if (frame_ > 0) track(result, clock);
+    // Until a frame with enough depth has started the map there is nothing
+    // to track against: such a frame is mapped at the current pose (the
+    // first camera defines the world).
+    const bool starts_map = !map_started_ && result.depth.valid >= std::max(params_.min_camera_terms, 1);
+    object_tracks_.assign(objects_.size(), ObjectTrack{});
+    if (map_started_) track(result, clock);
+    result.mapped = starts_map || result.camera_tracking == TrackingOutcome::tracked;
     render_models();
     result.times.raycast = clock.lap();
+    if (!result.mapped) {
+      // Integrating a frame at a pose that is not its own would corrupt every
+      // model; the detections and the deletion rules need that pose too.
+      report_objects(result);
+      finish(result, timestamp, clock);
+      return result;
+    }
     // Detection handling reads the segmentation on the host (detector
     // frames only); it does not change for the rest of the frame.
     const std::vector<int> seg = detections ? segmentation_.to_host() : std::vector<int>{};
+    Detections checked;
+    const Detections* det = detections ? usable_detections(*detections, checked, result) : nullptr;
 
     // Mapping weights of new objects: their detection masks.
     std::vector<NewObjectWeights> fresh;
     std::vector<int> matched_object_of_detection;
-    if (detections) handle_detections(*detections, seg, result, fresh, matched_object_of_detection);
+    if (det) handle_detections(*det, seg, result, fresh, matched_object_of_detection);
     result.times.detections = clock.lap();
 
-    integrate_models(depth, fresh);
+    integrate_models(depth_, fresh, starts_map);
+    map_started_ = true;
     result.times.integrate = clock.lap();
-    if (detections) update_foreground_counts(depth, *detections, seg, matched_object_of_detection, fresh);
+    if (det) update_foreground_counts(depth_, *det, seg, matched_object_of_detection, fresh);
     result.times.foreground = clock.lap();
 
-    delete_objects(result, detections != nullptr, int(fresh.size()));
-    record(timestamp);
-    result.live_objects = int(objects_.size());
-    result.times.total = clock.total();
-    ++frame_;
+    delete_objects(result, det != nullptr, int(fresh.size()), !starts_map);
+    finish(result, timestamp, clock);
     return result;
   }
 
@@ -276,6 +415,10 @@ class System {
     const B& backend;
     clock::time_point start, last;
   };
+  struct ObjectTrack {
+    TrackingOutcome outcome = TrackingOutcome::not_tracked;
+    PoseStep step;
+  };
   struct NewObjectWeights {
     Image<S, B> weights;              // 1 inside the usable mask, 0 elsewhere
     Image<std::uint8_t, B> mask;      // the same as bytes, for the foreground counts
@@ -292,6 +435,38 @@ class System {
     g.truncation = p.truncation_voxels * p.background_voxel_size;
     g.T_world_volume = volume_pose_in_front_of(SE3<S>::identity(), S(p.background_voxels) * p.background_voxel_size);
     return g;
+  }
+
+  // ---- Preprocessing -----------------------------------------------------
+
+  /// Counts the received depth's pixels by kind and copies its measurements
+  /// into depth_, holes everywhere else: nothing after this sees an invalid value.
+  DepthCounts sanitize_depth(const Image<S, B>& depth) {
+    if (!depth_.same_size(depth.width(), depth.height()))
+      depth_ = Image<S, B>(depth.width(), depth.height(), S(0), backend_);
+    const S max_depth = params_.max_depth;
+    for_each_index(backend_, depth.size(), detail::system::SanitizeDepth<S>{depth.view(), depth_.view(), max_depth});
+    return transform_reduce_index(backend_, depth.size(), detail::system::ClassifyDepth<S>{depth.view(), max_depth},
+                                  DepthCounts{}, detail::system::AddDepthCounts{});
+  }
+
+  /// The detections without instances the system cannot use: a label
+  /// outside 1..65535 (the label image's values) or one an earlier instance
+  /// has, or a score that is not finite. Copies only when one is dropped.
+  const Detections* usable_detections(const Detections& det, Detections& checked, FrameResult& result) const {
+    std::vector<bool> taken(65536, false), keep(det.instances.size(), true);
+    for (std::size_t d = 0; d < det.instances.size(); ++d) {
+      const Instance& inst = det.instances[d];
+      keep[d] = inst.label >= 1 && inst.label <= 65535 && std::isfinite(inst.score) && !taken[std::size_t(inst.label)];
+      if (keep[d]) taken[std::size_t(inst.label)] = true;
+      else ++result.invalid_detections;
+    }
+    if (result.invalid_detections == 0) return &det;
+    checked.timestamp = det.timestamp;
+    checked.labels = det.labels;
+    for (std::size_t d = 0; d < det.instances.size(); ++d)
+      if (keep[d]) checked.instances.push_back(det.instances[d]);
+    return &checked;
   }
 
   // ---- E-step ------------------------------------------------------------
@@ -348,15 +523,25 @@ class System {
     return a;
   }
 
+  /// Tracks the camera, then (if it was tracked) every object; poses whose
+  /// solve is refused stay where they were.
   void track(FrameResult& result, Clock& clock) {
     const SdfAlignmentParams<S> align = alignment_params();
     double e_ms = 0;
     associate();
     e_ms += clock.lap();
     const HuberNorm<S> bg_norm{params_.huber_voxels * background_.voxel_size()};
-    T_world_camera_ = align_to_volume(background_, points_, association_weights(0), T_world_camera_, bg_norm, align,
-                                      params_.lm, &result.camera);
+    const SE3<S> T_solved = align_to_volume(background_, points_, association_weights(0), T_world_camera_, bg_norm,
+                                            align, params_.lm, &result.camera);
+    result.camera_step = detail::system::step_between(T_world_camera_, T_solved);
+    result.camera_tracking = detail::system::tracking_outcome(result.camera, double(params_.min_camera_terms), T_solved,
+                                                              result.camera_step, params_.max_camera_motion);
     result.times.track_background = clock.lap();
+    if (result.camera_tracking != TrackingOutcome::tracked) {
+      result.times.e_step = e_ms;
+      return;  // the associations stay those at the previous poses
+    }
+    T_world_camera_ = T_solved;
     if (!objects_.empty()) {
       associate();
       e_ms += clock.lap();
@@ -371,8 +556,12 @@ class System {
         const SE3<S> T_volume_camera =
             align_in_volume(o.volume(), points_, association_weights(int(k) + 1),
                             o.volume().pose().inverse() * T_world_camera_, norm, obj_align, params_.lm, &report);
-        if (report.converged() && report.terms >= params_.min_object_terms)
-          o.set_pose(T_world_camera_ * T_volume_camera.inverse() * o.T_object_volume().inverse());
+        const SE3<S> T_world_object = T_world_camera_ * T_volume_camera.inverse() * o.T_object_volume().inverse();
+        ObjectTrack& t = object_tracks_[k];
+        t.step = detail::system::step_between(o.pose(), T_world_object);
+        t.outcome = detail::system::tracking_outcome(report, double(params_.min_object_terms), T_world_object, t.step,
+                                                     params_.max_object_motion);
+        if (t.outcome == TrackingOutcome::tracked) o.set_pose(T_world_object);
         result.objects.push_back(report);
       }
       result.times.track_objects = clock.lap();
@@ -428,8 +617,6 @@ class System {
                     "detection label image is " + std::to_string(det.labels.width()) + "x" +
                         std::to_string(det.labels.height()) + " but the camera is " + std::to_string(camera_.width) +
                         "x" + std::to_string(camera_.height));
-    result.detector_frame = true;
-    result.detections = int(det.instances.size());
     const DetectionMatch match =
         match_detections(mask_iou(det, seg, int(objects_.size())), params_.match_iou);
     object_of_detection = match.object_of;
@@ -496,7 +683,10 @@ class System {
                                                  const std::vector<Vec3<S>>& points, FrameResult& result) {
     const Instance& inst = det.instances[std::size_t(d)];
     if (is_listed_class(inst.class_name, params_.static_classes)) return std::nullopt;
-    if (int(objects_.size()) >= params_.max_objects) return std::nullopt;
+    if (int(objects_.size()) >= params_.max_objects) {
+      ++result.detections_over_cap;
+      return std::nullopt;
+    }
     int covered = 0, total = 0;
     const std::uint16_t* labels = det.labels.view().data;
     const std::vector<Vec3<S>> p = largest_depth_group(
@@ -552,9 +742,9 @@ class System {
 
   // ---- Mapping -----------------------------------------------------------
 
-  void integrate_models(const Image<S, B>& depth, const std::vector<NewObjectWeights>& fresh) {
+  /// `first`: the frame that starts the map, which has no association images.
+  void integrate_models(const Image<S, B>& depth, const std::vector<NewObjectWeights>& fresh, bool first) {
     const std::size_t old_objects = objects_.size() - fresh.size();
-    const bool first = frame_ == 0;
     integrate(background_, depth, camera_, T_world_camera_, first ? nullptr : association_weights(0),
               params_.background_integration);
     for (std::size_t k = 0; k < objects_.size(); ++k) {
@@ -591,24 +781,50 @@ class System {
 
   // ---- Deletion ----------------------------------------------------------
 
-  void delete_objects(FrameResult& result, bool detector_frame, int created) {
+  /// What tracking did with object k and what the deletion rules see of it
+  /// (`associated`: the association images are this frame's).
+  ObjectStatus object_status(int k, bool associated) const {
+    const Object& o = *objects_[std::size_t(k)];
+    const detail::system::ObjectPixels px = object_pixels(k);
+    ObjectStatus status;
+    status.id = o.id();
+    if (std::size_t(k) < object_tracks_.size()) {
+      status.tracking = object_tracks_[std::size_t(k)].outcome;
+      status.step = object_tracks_[std::size_t(k)].step;
+    }
+    status.rendered_pixels = px.rendered_inner;
+    status.associated_pixels = px.associated_inner;
+    // Visible where the model is drawn or where the frame's points belong
+    // to it: a model built from a few views renders a smaller mask than the
+    // object shows (about 20 % on the dynamic sequences), the E-step sees
+    // the measured object whole.
+    status.visible_pixels = std::max(px.rendered_inner, px.associated_inner);
+    if (!is_person(o) && associated) status.mean_association = px.rendered > 0 ? px.association_sum / px.rendered : 0.0;
+    return status;
+  }
+
+  /// The statuses of a frame that is not mapped: no deletion rule runs (an
+  /// empty or untracked frame says nothing about the objects).
+  void report_objects(FrameResult& result) const {
+    for (int k = 0; k < int(objects_.size()); ++k) result.object_status.push_back(object_status(k, false));
+  }
+
+  void finish(FrameResult& result, double timestamp, const Clock& clock) {
+    record(timestamp);
+    result.live_objects = int(objects_.size());
+    result.times.total = clock.total();
+    ++frame_;
+  }
+
+  /// `tracked`: tracking ran this frame, so association images exist for
+  /// every object that existed before it.
+  void delete_objects(FrameResult& result, bool detector_frame, int created, bool tracked) {
     const int old_objects = int(objects_.size()) - created;
     std::vector<DeletionReason> why(objects_.size(), DeletionReason::none);
-    // Association images exist from an object's second frame on.
-    const bool associated = params_.use_association && frame_ > 0;
+    const bool associated = params_.use_association && tracked;
     for (int k = 0; k < old_objects; ++k) {
       const Object& o = *objects_[std::size_t(k)];
-      const detail::system::ObjectPixels px = object_pixels(k);
-      ObjectStatus status;
-      status.id = o.id();
-      status.rendered_pixels = px.rendered_inner;
-      status.associated_pixels = px.associated_inner;
-      // Visible where the model is drawn or where the frame's points belong
-      // to it: a model built from a few views renders a smaller mask than the
-      // object shows (about 20 % on the dynamic sequences), the E-step sees
-      // the measured object whole.
-      status.visible_pixels = std::max(px.rendered_inner, px.associated_inner);
-      if (!is_person(o) && associated) status.mean_association = px.rendered > 0 ? px.association_sum / px.rendered : 0.0;
+      ObjectStatus status = object_status(k, associated);
       if (detector_frame && o.existence_probability() < params_.min_existence)
         why[std::size_t(k)] = DeletionReason::existence;
       else if (!is_person(o) && status.visible_pixels < min_mask_pixels())
@@ -667,9 +883,12 @@ class System {
   std::vector<ObjectRecord> records_;
   int next_id_ = 1;
   int frame_ = 0;
+  bool map_started_ = false;  ///< a frame has been mapped
+  std::vector<ObjectTrack> object_tracks_;  ///< this frame's, per object in objects() order
   SE3<S> T_world_camera_ = SE3<S>::identity();
   Trajectory camera_trajectory_;
 
+  Image<S, B> depth_;  ///< the received depth with every invalid pixel a hole
   Image<S, B> filtered_;
   Image<Vec3<S>, B> points_;
   Associations<S, B> associations_;
