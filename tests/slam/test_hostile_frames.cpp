@@ -534,18 +534,19 @@ TEMPLATE_LIST_TEST_CASE("Hostile frames: instances with unusable labels or score
   Image<int, Host> labels;
   const Image<S, Host> first = run.true_depth(0, &labels);
   Detections det = detections_of(labels, {3}, "sports_ball");
-  // Label 0 (no instance), beyond the label image's range (which would
-  // index past the matcher's 65536-entry table), negative, a repeated
+  // Label 0 (no instance), beyond the label image's range (65536 wrote
+  // past the matcher's 65536-entry table: a heap overflow under
+  // AddressSanitizer before labels were checked), negative, a repeated
   // label, a NaN score.
-  for (const int label : {0, 70000, -5, 1}) det.instances.push_back({label, "cup", 0.9});
+  for (const int label : {0, 65536, 70000, -5, 1}) det.instances.push_back({label, "cup", 0.9});
   det.instances.push_back({2, "cup", std::numeric_limits<double>::quiet_NaN()});
   const FrameResult& r = run.process(first, &det);
-  CHECK(r.detections == 6);
-  CHECK(r.invalid_detections == 5);
+  CHECK(r.detections == 7);
+  CHECK(r.invalid_detections == 6);
   REQUIRE(r.created.size() == 1);
   CHECK(run.system.objects()[0]->class_name() == "sports_ball");
   const FrameResult& r2 = run.good(&det);
-  CHECK(r2.invalid_detections == 5);
+  CHECK(r2.invalid_detections == 6);
   CHECK(r2.matched == 1);
 }
 
