@@ -18,6 +18,8 @@ EMFUSION_DEBIAN_PACKAGES=(
   zlib1g-dev
   libpng-dev
   libjpeg-dev
+  clang
+  libclang-rt-14-dev
 )
 
 log() { echo "[setup-debian] $*"; }

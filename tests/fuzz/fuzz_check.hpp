@@ -88,7 +88,7 @@ bool returns(F&& parse, const std::string& source, const char* never = nullptr) 
 
 /// A per-process file name for targets whose reader needs a file: in
 /// /dev/shm when there is one (memory: on a disk, writing the input each run
-/// made the .klg target 20 times slower), else in the temporary directory.
+/// cost the .klg target 40 times its runs), else in the temporary directory.
 inline std::string scratch_file(const std::string& stem) {
   std::error_code ec;
   const std::filesystem::path shm = "/dev/shm";
