@@ -12,6 +12,25 @@ function(emfusion_use_project_settings target)
     target_compile_options(${target} PRIVATE $<$<COMPILE_LANGUAGE:CXX>:-Werror>
       $<$<COMPILE_LANGUAGE:CUDA>:-Werror=all-warnings>)
   endif()
+  if(EMFUSION_SANITIZERS)
+    # Host code only: nvcc does not take -fsanitize (the CUDA build is
+    # checked with compute-sanitizer instead, docs/building.md). GCC's
+    # -Wmaybe-uninitialized gives false positives under the sanitizers
+    # (libstdc++'s <regex> with -fsanitize=address), so it is off there.
+    # Every check stops the process, except `null`, which stays recoverable so
+    # that tests/support/ubsan.supp can suppress thrust's own null-reference
+    # idiom (UBSan suppresses only recoverable checks; halt_on_error=1 in the
+    # test preset still stops on any other null report).
+    list(JOIN EMFUSION_SANITIZERS "," _emf_sanitizers)
+    set(_emf_recover)
+    if("undefined" IN_LIST EMFUSION_SANITIZERS)
+      set(_emf_recover -fsanitize-recover=null)
+    endif()
+    target_compile_options(${target} PRIVATE
+      $<$<COMPILE_LANGUAGE:CXX>:-fsanitize=${_emf_sanitizers} -fno-sanitize-recover=all ${_emf_recover} -fno-omit-frame-pointer -g1>
+      $<$<AND:$<COMPILE_LANGUAGE:CXX>,$<CXX_COMPILER_ID:GNU>>:-Wno-maybe-uninitialized>)
+    target_link_options(${target} PRIVATE -fsanitize=${_emf_sanitizers})
+  endif()
   if(EMFUSION_WITH_CUDA)
     get_target_property(_srcs ${target} SOURCES)
     set_source_files_properties(${_srcs} TARGET_DIRECTORY ${target} PROPERTIES LANGUAGE CUDA)

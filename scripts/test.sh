@@ -1,11 +1,19 @@
 #!/usr/bin/env bash
 # The project's test command (README; CI runs exactly this via .ci/run):
 #   1. installs the Debian packages (scripts/setup-debian.sh; no-op when present),
-#   2. configures, builds and tests the CPU-only build in build/ (ctest),
-#   3. when nvcc is present, configures build-cuda/ and compiles every target
+#   2. configures, builds and tests the CPU-only build in build/ (preset
+#      release; ctest),
+#   3. builds the same under AddressSanitizer + UBSan in build-asan/ (preset
+#      asan-ubsan) and runs the whole ctest suite there,
+#   4. fuzzes every parser for EMFUSION_FUZZ_SECONDS each (scripts/fuzz.sh,
+#      clang + libFuzzer, build-fuzz/),
+#   5. when nvcc is present, configures build-cuda/ and compiles every target
 #      of the CUDA build without running it (CI has no GPU), so that the CUDA
 #      code path keeps compiling.
-# Environment: EMFUSION_JOBS overrides the parallel build jobs (default: nproc).
+# Environment: EMFUSION_JOBS overrides the parallel build jobs (default:
+# nproc); EMFUSION_FUZZ_SECONDS the fuzzing time per target (default 30 here;
+# scripts/fuzz.sh alone defaults to 60); EMFUSION_SKIP_SANITIZERS=1 and
+# EMFUSION_SKIP_FUZZ=1 skip steps 3 and 4 (for quick local runs; CI runs all).
 set -euo pipefail
 
 repo_root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
@@ -21,15 +29,30 @@ say() { echo "==> [test.sh] $*"; }
 say "installing dependencies (scripts/setup-debian.sh)"
 bash scripts/setup-debian.sh
 
-say "CPU build: configuring build/"
-cmake -S . -B build \
-  -DEMFUSION_CUDA=OFF \
-  -DCMAKE_BUILD_TYPE=Release \
-  -DEMFUSION_WERROR=ON
+say "CPU build: configuring build/ (preset release)"
+cmake --preset release
 say "CPU build: building with -j${jobs}"
-cmake --build build -j "$jobs"
+cmake --build --preset release -j "$jobs"
 say "CPU build: running ctest (OMP_WAIT_POLICY=${OMP_WAIT_POLICY})"
-(cd build && ctest --output-on-failure)
+ctest --preset release
+
+if [[ "${EMFUSION_SKIP_SANITIZERS:-0}" != 1 ]]; then
+  say "sanitizers: configuring build-asan/ (preset asan-ubsan: AddressSanitizer + UBSan)"
+  cmake --preset asan-ubsan
+  say "sanitizers: building with -j${jobs}"
+  cmake --build --preset asan-ubsan -j "$jobs"
+  say "sanitizers: running the whole ctest suite under ASan + UBSan (leak checks on)"
+  ctest --preset asan-ubsan
+else
+  say "sanitizers: SKIPPED (EMFUSION_SKIP_SANITIZERS=1)"
+fi
+
+if [[ "${EMFUSION_SKIP_FUZZ:-0}" != 1 ]]; then
+  say "fuzzing: scripts/fuzz.sh, ${EMFUSION_FUZZ_SECONDS:-30} s per target"
+  EMFUSION_FUZZ_SECONDS="${EMFUSION_FUZZ_SECONDS:-30}" bash scripts/fuzz.sh
+else
+  say "fuzzing: SKIPPED (EMFUSION_SKIP_FUZZ=1)"
+fi
 
 nvcc_path=""
 if command -v nvcc >/dev/null 2>&1; then

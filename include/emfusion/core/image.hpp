@@ -111,8 +111,9 @@ class Image {
     detail::require(v >= 0, "Image", std::string(what) + " must not be negative, got " + std::to_string(v));
     return v;
   }
-  T* raw() { return thrust::raw_pointer_cast(data_.data()); }
-  const T* raw() const { return thrust::raw_pointer_cast(data_.data()); }
+  // No pointer into an empty vector: thrust forms it by dereferencing null.
+  T* raw() { return data_.empty() ? nullptr : thrust::raw_pointer_cast(data_.data()); }
+  const T* raw() const { return data_.empty() ? nullptr : thrust::raw_pointer_cast(data_.data()); }
 
   int width_ = 0;
   int height_ = 0;
