@@ -13,8 +13,6 @@
 // The detector's own time is not part of the system's (it is precomputed,
 // as a real detector runs beside the system). On small CPUs set
 // OMP_WAIT_POLICY=passive (docs/benchmarks.md).
-#include <sys/resource.h>
-
 #include <algorithm>
 #include <cstdio>
 #include <filesystem>
@@ -33,6 +31,7 @@
 #include "emfusion/sim/dynamic_scene.hpp"
 #include "emfusion/slam/system.hpp"
 #include "support/args.hpp"
+#include "memory.hpp"
 #include "support/backend.hpp"
 
 using namespace emfusion;
@@ -106,25 +105,6 @@ Stats stats(std::vector<double> v) {
   return {v[v.size() / 2], v[std::min(v.size() - 1, (v.size() * 9) / 10)]};
 }
 
-double peak_host_mib() {
-  rusage u{};
-  getrusage(RUSAGE_SELF, &u);
-  return double(u.ru_maxrss) / 1024.0;  // KiB on Linux
-}
-
-/// Device memory in use now (MiB); 0 on the host backend.
-template <class B>
-double device_used_mib() {
-#if EMFUSION_HAS_CUDA
-  if constexpr (std::is_same_v<B, Cuda>) {
-    std::size_t free = 0, total = 0;
-    cudaMemGetInfo(&free, &total);
-    return double(total - free) / (1024.0 * 1024.0);
-  }
-#endif
-  return 0;
-}
-
 template <class B>
 void run(const Options& o) {
   const Workload w = load(o);
@@ -132,7 +112,7 @@ void run(const Options& o) {
   params.background_voxels = o.voxels;
   params.background_voxel_size = S(o.voxel_size);
   const B backend{};
-  const double device_before = device_used_mib<B>();
+  const double device_before = bench::device_used_mib<B>();
   double device_peak = device_before;
   System<S, B> system(w.camera.cast<S>(), params, backend);
   std::vector<StageTimes> times;
@@ -142,7 +122,7 @@ void run(const Options& o) {
     const FrameResult r = system.process(depth, w.timestamps[i], w.detections[i] ? &*w.detections[i] : nullptr);
     if (i > 0) times.push_back(r.times);
     max_objects = std::max(max_objects, r.live_objects);
-    device_peak = std::max(device_peak, device_used_mib<B>());
+    device_peak = std::max(device_peak, bench::device_used_mib<B>());
   }
 
   JsonWriter json;
@@ -168,7 +148,7 @@ void run(const Options& o) {
     json.begin(name).number("median", s.median).number("p90", s.p90).end();
   }
   json.end();
-  const double host = peak_host_mib(), device = device_peak - device_before;
+  const double host = bench::peak_host_mib(), device = device_peak - device_before;
   std::printf("peak host memory %.0f MiB; device memory used by the system %.0f MiB\n", host, device);
   json.number("peak_host_mib", host).number("device_mib", device);
   if (w.camera_truth && system.camera_trajectory().size() >= 3) {

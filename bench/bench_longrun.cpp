@@ -1,0 +1,172 @@
+// bench_longrun: a long run of the whole system on a synthetic dynamic scene
+// (default 3000 frames), rendering each frame when it is needed so that the
+// process holds one frame at a time. Every --sample-every frames it records
+// the resident host memory and the device memory in use; at the end it
+// prints the samples, the growth after warm-up (the last sample minus the
+// first one at or after --warmup frames) and the camera and object ATE.
+// With --max-growth-mib X it exits with status 2 when either growth exceeds
+// X, so that a test can hold the system to flat memory.
+//
+//   bench_longrun [--backend cpu|cuda] [--frames N] [--objects K] [--width W]
+//                 [--voxels N] [--voxel-size M] [--sample-every N]
+//                 [--warmup N] [--max-growth-mib X] [--json FILE]
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <map>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "emfusion/eval/ate.hpp"
+#include "emfusion/eval/object_matching.hpp"
+#include "emfusion/io/run_outputs.hpp"
+#include "emfusion/sim/detector.hpp"
+#include "emfusion/sim/dynamic_scene.hpp"
+#include "emfusion/slam/system.hpp"
+#include "memory.hpp"
+#include "support/args.hpp"
+#include "support/backend.hpp"
+
+using namespace emfusion;
+using S = float;
+
+namespace {
+
+struct Options {
+  std::string backend = "cpu", json;
+  int frames = 3000, objects = 3, width = 320, voxels = 256, sample_every = 100, warmup = 500;
+  double voxel_size = 0.02, max_growth_mib = -1;
+};
+
+struct Sample {
+  int frame = 0;
+  double host_mib = 0, device_mib = 0;
+  int live_objects = 0, created = 0, deleted = 0;
+};
+
+template <class B>
+int run(const Options& o) {
+  sim::DynamicSceneParams p;
+  p.frames = o.frames;
+  p.width = o.width;
+  p.height = o.width * 3 / 4;
+  p.moving_objects = o.objects;
+  const sim::SyntheticSequence seq(p);
+  sim::SimulatedDetectorParams dp;
+  dp.min_area = std::max(1, int(dp.min_area * double(p.width) * p.height / (640.0 * 480.0)));
+  sim::SimulatedDetector<float> detector(seq.scene(), dp);
+
+  SystemParams<S> params;
+  params.background_voxels = o.voxels;
+  params.background_voxel_size = S(o.voxel_size);
+  const B backend{};
+  System<S, B> system(seq.camera().cast<S>(), params, backend);
+
+  std::printf("%s, %zu frames of %dx%d, background %d^3 x %.3g m, %d moving objects\n", B::name, seq.size(),
+              p.width, p.height, o.voxels, o.voxel_size, o.objects);
+  std::printf("%8s %10s %12s %6s %8s %8s %10s\n", "frame", "host MiB", "device MiB", "live", "created", "deleted",
+              "ms/frame");
+  std::vector<Sample> samples;
+  std::vector<double> frame_ms;
+  int created = 0, deleted = 0;
+  for (std::size_t i = 0; i < seq.size(); ++i) {
+    const Image<S, B> depth = seq.depth(i).template to<B>(backend);
+    const std::optional<Detections> det = detector.detect(int(i), seq.timestamp(i));
+    const FrameResult r = system.process(depth, seq.timestamp(i), det ? &*det : nullptr);
+    created += int(r.created.size());
+    deleted += int(r.deleted.size());
+    if (i > 0) frame_ms.push_back(r.times.total);
+    const int frame = int(i) + 1;
+    if (frame % o.sample_every == 0 || i + 1 == seq.size()) {
+      const Sample s{frame, bench::current_host_mib(), bench::device_used_mib<B>(), r.live_objects, created, deleted};
+      samples.push_back(s);
+      std::vector<double> recent(frame_ms.end() - std::min<std::ptrdiff_t>(std::ptrdiff_t(frame_ms.size()), o.sample_every),
+                                 frame_ms.end());
+      std::sort(recent.begin(), recent.end());
+      std::printf("%8d %10.1f %12.1f %6d %8d %8d %10.2f\n", s.frame, s.host_mib, s.device_mib, s.live_objects,
+                  s.created, s.deleted, recent.empty() ? 0.0 : recent[recent.size() / 2]);
+      std::fflush(stdout);
+    }
+  }
+
+  // Growth after warm-up: last sample minus the first at or after --warmup.
+  const auto first = std::find_if(samples.begin(), samples.end(), [&](const Sample& s) { return s.frame >= o.warmup; });
+  double host_growth = 0, device_growth = 0;
+  if (first != samples.end()) {
+    host_growth = samples.back().host_mib - first->host_mib;
+    device_growth = samples.back().device_mib - first->device_mib;
+    std::printf("growth from frame %d to %d: host %+.1f MiB, device %+.1f MiB\n", first->frame, samples.back().frame,
+                host_growth, device_growth);
+  } else {
+    std::printf("no sample at or after the warm-up (frame %d): growth not measured\n", o.warmup);
+  }
+
+  JsonWriter json;
+  json.begin().string("backend", B::name).integer("frames", (long long)seq.size());
+  json.integer("width", p.width).integer("height", p.height).integer("objects", o.objects);
+  json.integer("background_voxels", o.voxels).number("background_voxel_size_m", o.voxel_size);
+  json.integer("warmup", o.warmup).number("host_growth_mib", host_growth).number("device_growth_mib", device_growth);
+  json.number("peak_host_mib", bench::peak_host_mib());
+  json.begin("samples");
+  for (const Sample& s : samples)
+    json.begin(std::to_string(s.frame)).number("host_mib", s.host_mib).number("device_mib", s.device_mib)
+        .integer("live_objects", s.live_objects).integer("created", s.created).integer("deleted", s.deleted).end();
+  json.end();
+  const auto ate = eval::absolute_trajectory_error(system.camera_trajectory(), seq.scene().camera_trajectory());
+  std::printf("camera ATE %.2f cm over %zu frames\n", 100 * ate.rmse, seq.size());
+  json.number("camera_ate_m", ate.rmse);
+  std::map<int, Trajectory> estimates;
+  for (const ObjectRecord& r : system.object_records()) estimates[r.id] = r.trajectory;
+  std::map<std::string, Trajectory> truth;
+  for (int k = 0; k < seq.scene().object_count(); ++k) truth[seq.scene().object_name(k)] = seq.scene().object_trajectory(k);
+  json.begin("objects");
+  for (const auto& e : eval::evaluate_objects(system.camera_trajectory(), seq.scene().camera_trajectory(), estimates, truth)) {
+    if (e.evaluated)
+      std::printf("object %-14s ATE %.2f cm, coverage %.0f %%\n", e.name.c_str(), 100 * e.result.ate.rmse,
+                  100 * e.result.coverage);
+    else
+      std::printf("object %-14s not evaluated (%s)\n", e.name.c_str(), e.problem.c_str());
+    json.begin(e.name).number("ate_rmse_m", e.evaluated ? e.result.ate.rmse : NAN)
+        .number("coverage", e.evaluated ? e.result.coverage : 0.0).end();
+  }
+  json.end().end();
+  if (!o.json.empty()) write_text_file(o.json, json.str());
+
+  if (o.max_growth_mib >= 0 && (host_growth > o.max_growth_mib || device_growth > o.max_growth_mib)) {
+    std::fprintf(stderr, "bench_longrun: memory grew by more than %.1f MiB after frame %d (host %+.1f, device %+.1f)\n",
+                 o.max_growth_mib, o.warmup, host_growth, device_growth);
+    return 2;
+  }
+  return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  try {
+    Options o;
+    for (int i = 1; i < argc; ++i) {
+      const std::string a = argv[i];
+      if (i + 1 >= argc) throw std::invalid_argument("option '" + a + "' needs a value (or is unknown)");
+      const std::string v = argv[++i];
+      if (a == "--backend") o.backend = v;
+      else if (a == "--frames") o.frames = examples::parse_positive_int(a, v, 1000000);
+      else if (a == "--objects") o.objects = examples::parse_int(a, v, 1, 8);
+      else if (a == "--width") o.width = examples::parse_int(a, v, 64, 4096);
+      else if (a == "--voxels") o.voxels = examples::parse_int(a, v, 8, 2048);
+      else if (a == "--voxel-size") o.voxel_size = examples::parse_positive_double(a, v);
+      else if (a == "--sample-every") o.sample_every = examples::parse_positive_int(a, v, 1000000);
+      else if (a == "--warmup") o.warmup = examples::parse_int(a, v, 0, 1000000);
+      else if (a == "--max-growth-mib") o.max_growth_mib = examples::parse_positive_double(a, v);
+      else if (a == "--json") o.json = v;
+      else throw std::invalid_argument("unknown option '" + a + "'");
+    }
+    int status = 0;
+    examples::with_backend(o.backend, [&](auto backend) { status = run<decltype(backend)>(o); });
+    return status;
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "bench_longrun: error: %s\n", e.what());
+    return 1;
+  }
+}
