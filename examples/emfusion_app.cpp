@@ -337,7 +337,7 @@ void print_evaluation(const Trajectory& est_cam, const std::map<int, Trajectory>
 template <class B>
 void write_pictures(const std::string& dir, std::size_t frame, const std::optional<ColourImage>& colour,
                     const System<S, B>& system, const FrameResult& result) {
-  char number[16];
+  char number[24];  // room for any size_t: g++ -Wformat-truncation checks it
   std::snprintf(number, sizeof(number), "%06zu", frame);
   const ColourImage* c = colour ? &*colour : nullptr;
   // The segmentation and the association images of this frame were made
@@ -393,6 +393,14 @@ void run(const RunOptions& o) {
           if (rec.id == id)
             std::fprintf(stderr, "%sframe %zu: deleted object %d (%s): %s\n", tty ? "\n" : "", i, id,
                          rec.class_name.c_str(), to_string(rec.reason));
+      // Frames the system refused to map, and detections it ignored (docs/system.md, "Hostile input").
+      if (r.camera_tracking != TrackingOutcome::tracked && r.camera_tracking != TrackingOutcome::not_tracked)
+        std::fprintf(stderr, "%sframe %zu: camera %s (step %.3f m, %.1f deg, %d valid depth pixels), frame not mapped\n",
+                     tty ? "\n" : "", i, to_string(r.camera_tracking), r.camera_step.translation,
+                     r.camera_step.rotation * 180.0 / 3.14159265358979323846, r.depth.valid);
+      if (r.invalid_detections > 0 || r.detections_over_cap > 0)
+        std::fprintf(stderr, "%sframe %zu: %d detections ignored (unusable label or score), %d over the object cap\n",
+                     tty ? "\n" : "", i, r.invalid_detections, r.detections_over_cap);
     }
     const double elapsed = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     const double fps = double(i + 1) / elapsed;
@@ -520,7 +528,7 @@ int main(int argc, char** argv) {
   run_cmd->add_option("--config", o.config, "parameter file: key = value per line")->check(CLI::ExistingFile);
   run_cmd->add_option("--set", o.overrides, "override a parameter: key=value (repeatable)");
   run_cmd->add_option("--max-frames", o.max_frames, "process at most N frames")->check(CLI::PositiveNumber);
-  run_cmd->add_flag("--verbose,-v", o.verbose, "log object creation and deletion");
+  run_cmd->add_flag("--verbose,-v", o.verbose, "log object creation and deletion, refused frames and ignored detections");
   run_cmd->add_flag("--pictures", o.pictures,
                     "write per-frame segmentation and association pictures to <output>/pictures/");
   std::string eval_sequence, eval_output;

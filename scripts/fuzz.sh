@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Builds the libFuzzer targets of tests/fuzz/ with clang (build-fuzz/,
 # -fsanitize=fuzzer,address,undefined, CPU only, no tests/examples/benchmarks)
-# and runs each for EMFUSION_FUZZ_SECONDS seconds (default 60), starting from
+# and runs each for EMFUSION_FUZZ_SECONDS seconds (default 60; EMFUSION_JOBS
+# targets at a time, default nproc), starting from
 # its seeds (tests/fuzz/corpus/<target>/) and regression inputs
 # (tests/fuzz/regressions/<target>/). New corpus entries go to
 # build-fuzz/fuzz-corpus/<target>/, never into the repository. Prints one
@@ -49,32 +50,60 @@ cmake -S "$root" -B "$build" -DCMAKE_CXX_COMPILER=clang++ -DCMAKE_BUILD_TYPE=Rel
   { cat "$build/configure.log" >&2; exit 1; }
 cmake --build "$build" -j "$jobs" --target "${build_targets[@]}"
 
-failed=()
-for target in "${targets[@]}"; do
-  exe="$build/tests/fuzz/fuzz_$target"
-  corpus="$build/fuzz-corpus/$target"
-  artifacts="$build/fuzz-artifacts/$target"
-  out="$build/fuzz-logs/$target.log"
+# One target: runs it and writes its summary (and, on failure, the first
+# lines of the report) to $build/fuzz-logs/<target>.summary; status file
+# <target>.failed marks a failure.
+run_target() {
+  local target="$1"
+  local exe="$build/tests/fuzz/fuzz_$target"
+  local corpus="$build/fuzz-corpus/$target"
+  local artifacts="$build/fuzz-artifacts/$target"
+  local out="$build/fuzz-logs/$target.log"
+  local summary="$build/fuzz-logs/$target.summary"
   mkdir -p "$corpus" "$artifacts" "$(dirname "$out")"
-  seeds=("$root/tests/fuzz/corpus/$target")
+  rm -f "$build/fuzz-logs/$target.failed"
+  local seeds=("$root/tests/fuzz/corpus/$target")
   [[ -d "$root/tests/fuzz/regressions/$target" ]] && seeds+=("$root/tests/fuzz/regressions/$target")
-  start=$SECONDS
-  status=0
+  local start=$SECONDS status=0
   # The first directory receives new entries; the seeds are only read.
   (cd "$build" && "$exe" -max_total_time="$seconds" -rss_limit_mb=2048 -timeout=10 -print_final_stats=1 \
      -artifact_prefix="$artifacts/" "$corpus" "${seeds[@]}") >"$out" 2>&1 || status=$?
-  elapsed=$((SECONDS - start))
+  local elapsed=$((SECONDS - start))
+  local runs cov corpus_size
   runs="$(grep -o 'stat::number_of_executed_units: *[0-9]*' "$out" | grep -o '[0-9]*$' || true)"
   cov="$(grep -oE '(#[0-9]+|DONE).*cov: [0-9]+ ft: [0-9]+' "$out" | tail -n 1 | grep -oE 'cov: [0-9]+ ft: [0-9]+' || true)"
   corpus_size="$(find "$corpus" -type f | wc -l)"
   if [[ $status -eq 0 ]]; then
-    log "$target: ${runs:-?} runs, ${cov:-cov: ?}, scratch corpus $corpus_size files, ${elapsed} s: ok"
+    log "$target: ${runs:-?} runs, ${cov:-cov: ?}, scratch corpus $corpus_size files, ${elapsed} s: ok" >"$summary"
   else
-    crash="$(grep -oE "Test unit written to [^ ]+" "$out" | tail -n 1 | awk '{print $NF}' || true)"
-    log "$target: FAILED after ${elapsed} s (exit $status, ${runs:-?} runs): crash file ${crash:-none written}; log $out"
-    grep -E "ERROR: |SUMMARY: |fuzz invariant violated|fuzz: " "$out" | head -n 5 | sed 's/^/[fuzz]   /' || true
-    failed+=("$target")
+    local crash
+    crash="$(grep -oE "(Test unit written to|artifact_prefix.*; Test unit written to) [^ ]+" "$out" | tail -n 1 |
+             awk '{print $NF}' || true)"
+    {
+      log "$target: FAILED after ${elapsed} s (exit $status, ${runs:-?} runs): crash file ${crash:-none written}; log $out"
+      grep -E "ERROR: |SUMMARY: |fuzz invariant violated|fuzz: " "$out" | head -n 5 | sed 's/^/[fuzz]   /' || true
+    } >"$summary"
+    touch "$build/fuzz-logs/$target.failed"
   fi
+}
+
+# EMFUSION_JOBS targets at a time (each fuzzer is one process on one core).
+log "running ${#targets[@]} targets, ${seconds} s each, ${jobs} at a time"
+running=0
+for target in "${targets[@]}"; do
+  run_target "$target" &
+  running=$((running + 1))
+  if [[ $running -ge $jobs ]]; then
+    wait -n || true
+    running=$((running - 1))
+  fi
+done
+wait
+
+failed=()
+for target in "${targets[@]}"; do
+  cat "$build/fuzz-logs/$target.summary"
+  [[ -e "$build/fuzz-logs/$target.failed" ]] && failed+=("$target")
 done
 
 if [[ ${#failed[@]} -gt 0 ]]; then
