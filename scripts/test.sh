@@ -2,9 +2,10 @@
 # The project's test command (README; CI runs exactly this via .ci/run):
 #   1. installs the Debian packages (scripts/setup-debian.sh; no-op when present),
 #   2. configures, builds and tests the CPU-only build in build/ (preset
-#      release; ctest),
+#      release; every ctest entry but the label integration),
 #   3. builds the same under AddressSanitizer + UBSan in build-asan/ (preset
-#      asan-ubsan) and runs the whole ctest suite there,
+#      asan-ubsan) and runs the whole ctest suite there, the long simulated
+#      runs (label integration) included,
 #   4. fuzzes every parser for EMFUSION_FUZZ_SECONDS each (scripts/fuzz.sh,
 #      clang + libFuzzer, build-fuzz/),
 #   5. when nvcc is present, configures build-cuda/ and compiles every target
@@ -33,7 +34,7 @@ say "CPU build: configuring build/ (preset release)"
 cmake --preset release
 say "CPU build: building with -j${jobs}"
 cmake --build --preset release -j "$jobs"
-say "CPU build: running ctest (OMP_WAIT_POLICY=${OMP_WAIT_POLICY})"
+say "CPU build: running ctest without the label integration (it runs under the sanitizers; OMP_WAIT_POLICY=${OMP_WAIT_POLICY})"
 ctest --preset release
 
 if [[ "${EMFUSION_SKIP_SANITIZERS:-0}" != 1 ]]; then
