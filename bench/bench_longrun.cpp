@@ -19,12 +19,12 @@
 #include <vector>
 
 #include "emfusion/eval/ate.hpp"
-#include "emfusion/eval/object_matching.hpp"
 #include "emfusion/io/run_outputs.hpp"
 #include "emfusion/sim/detector.hpp"
 #include "emfusion/sim/dynamic_scene.hpp"
 #include "emfusion/slam/system.hpp"
 #include "memory.hpp"
+#include "report.hpp"
 #include "support/args.hpp"
 #include "support/backend.hpp"
 
@@ -113,24 +113,16 @@ int run(const Options& o) {
     json.begin(std::to_string(s.frame)).number("host_mib", s.host_mib).number("device_mib", s.device_mib)
         .integer("live_objects", s.live_objects).integer("created", s.created).integer("deleted", s.deleted).end();
   json.end();
-  const auto ate = eval::absolute_trajectory_error(system.camera_trajectory(), seq.scene().camera_trajectory());
-  std::printf("camera ATE %.2f cm over %zu frames\n", 100 * ate.rmse, seq.size());
-  json.number("camera_ate_m", ate.rmse);
-  std::map<int, Trajectory> estimates;
-  for (const ObjectRecord& r : system.object_records()) estimates[r.id] = r.trajectory;
-  std::map<std::string, Trajectory> truth;
-  for (int k = 0; k < seq.scene().object_count(); ++k) truth[seq.scene().object_name(k)] = seq.scene().object_trajectory(k);
-  json.begin("objects");
-  for (const auto& e : eval::evaluate_objects(system.camera_trajectory(), seq.scene().camera_trajectory(), estimates, truth)) {
-    if (e.evaluated)
-      std::printf("object %-14s ATE %.2f cm, coverage %.0f %%\n", e.name.c_str(), 100 * e.result.ate.rmse,
-                  100 * e.result.coverage);
-    else
-      std::printf("object %-14s not evaluated (%s)\n", e.name.c_str(), e.problem.c_str());
-    json.begin(e.name).number("ate_rmse_m", e.evaluated ? e.result.ate.rmse : NAN)
-        .number("coverage", e.evaluated ? e.result.coverage : 0.0).end();
+  if (system.camera_trajectory().size() >= 3) {  // the ATE needs three poses
+    const auto ate = eval::absolute_trajectory_error(system.camera_trajectory(), seq.scene().camera_trajectory());
+    std::printf("camera ATE %.2f cm over %zu frames\n", 100 * ate.rmse, seq.size());
+    json.number("camera_ate_m", ate.rmse);
+    std::map<std::string, Trajectory> truth;
+    for (int k = 0; k < seq.scene().object_count(); ++k)
+      truth[seq.scene().object_name(k)] = seq.scene().object_trajectory(k);
+    bench::report_objects(system, seq.scene().camera_trajectory(), truth, json);
   }
-  json.end().end();
+  json.end();
   if (!o.json.empty()) write_text_file(o.json, json.str());
 
   if (o.max_growth_mib >= 0 && (host_growth > o.max_growth_mib || device_growth > o.max_growth_mib)) {
@@ -146,10 +138,7 @@ int run(const Options& o) {
 int main(int argc, char** argv) {
   try {
     Options o;
-    for (int i = 1; i < argc; ++i) {
-      const std::string a = argv[i];
-      if (i + 1 >= argc) throw std::invalid_argument("option '" + a + "' needs a value (or is unknown)");
-      const std::string v = argv[++i];
+    examples::for_each_option(argc, argv, [&](const std::string& a, const std::string& v) {
       if (a == "--backend") o.backend = v;
       else if (a == "--frames") o.frames = examples::parse_positive_int(a, v, 1000000);
       else if (a == "--objects") o.objects = examples::parse_int(a, v, 1, 8);
@@ -161,7 +150,7 @@ int main(int argc, char** argv) {
       else if (a == "--max-growth-mib") o.max_growth_mib = examples::parse_positive_double(a, v);
       else if (a == "--json") o.json = v;
       else throw std::invalid_argument("unknown option '" + a + "'");
-    }
+    });
     int status = 0;
     examples::with_backend(o.backend, [&](auto backend) { status = run<decltype(backend)>(o); });
     return status;

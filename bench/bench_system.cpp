@@ -23,7 +23,6 @@
 #include <vector>
 
 #include "emfusion/eval/ate.hpp"
-#include "emfusion/eval/object_matching.hpp"
 #include "emfusion/io/masks.hpp"
 #include "emfusion/io/run_outputs.hpp"
 #include "emfusion/io/tum.hpp"
@@ -32,6 +31,7 @@
 #include "emfusion/slam/system.hpp"
 #include "support/args.hpp"
 #include "memory.hpp"
+#include "report.hpp"
 #include "support/backend.hpp"
 
 using namespace emfusion;
@@ -155,20 +155,7 @@ void run(const Options& o) {
     const auto ate = eval::absolute_trajectory_error(system.camera_trajectory(), *w.camera_truth);
     std::printf("camera ATE %.2f cm\n", 100 * ate.rmse);
     json.number("camera_ate_m", ate.rmse);
-    std::map<int, Trajectory> estimates;
-    for (const ObjectRecord& r : system.object_records()) estimates[r.id] = r.trajectory;
-    json.begin("objects");
-    for (const auto& e : eval::evaluate_objects(system.camera_trajectory(), *w.camera_truth, estimates, w.object_truth)) {
-      if (e.evaluated)
-        std::printf("object %-14s ATE %.2f cm, coverage %.0f %%\n", e.name.c_str(), 100 * e.result.ate.rmse,
-                    100 * e.result.coverage);
-      else
-        std::printf("object %-14s not evaluated (%s)\n", e.name.c_str(), e.problem.c_str());
-      json.begin(e.name).boolean("evaluated", e.evaluated);
-      json.number("ate_rmse_m", e.evaluated ? e.result.ate.rmse : NAN);
-      json.number("coverage", e.evaluated ? e.result.coverage : 0.0).end();
-    }
-    json.end();
+    bench::report_objects(system, *w.camera_truth, w.object_truth, json);
   }
   json.end();
   if (!o.json.empty()) write_text_file(o.json, json.str());
@@ -179,10 +166,7 @@ void run(const Options& o) {
 int main(int argc, char** argv) {
   try {
     Options o;
-    for (int i = 1; i < argc; ++i) {
-      const std::string a = argv[i];
-      if (i + 1 >= argc) throw std::invalid_argument("option '" + a + "' needs a value (or is unknown)");
-      const std::string v = argv[++i];
+    examples::for_each_option(argc, argv, [&](const std::string& a, const std::string& v) {
       if (a == "--backend") o.backend = v;
       else if (a == "--frames") o.frames = examples::parse_positive_int(a, v);
       else if (a == "--objects") o.objects = examples::parse_int(a, v, 1, 8);
@@ -192,7 +176,7 @@ int main(int argc, char** argv) {
       else if (a == "--sequence") o.sequence = v;
       else if (a == "--json") o.json = v;
       else throw std::invalid_argument("unknown option '" + a + "'");
-    }
+    });
     examples::with_backend(o.backend, [&](auto backend) { run<decltype(backend)>(o); });
     return 0;
   } catch (const std::exception& e) {

@@ -34,4 +34,15 @@ inline double parse_positive_double(const std::string& flag, const std::string& 
   return v;
 }
 
+/// Calls f(flag, value) for every "--flag value" pair of the command line;
+/// throws std::invalid_argument for a last argument without a value.
+template <class F>
+void for_each_option(int argc, char** argv, F&& f) {
+  for (int i = 1; i < argc; i += 2) {
+    const std::string flag = argv[i];
+    if (i + 1 >= argc) throw std::invalid_argument("option '" + flag + "' needs a value (or is unknown)");
+    f(flag, std::string(argv[i + 1]));
+  }
+}
+
 }  // namespace emfusion::examples
