@@ -1,5 +1,6 @@
-// The two loops everything is built from: run a functor for every index, and
-// reduce functor results over every index, on any backend.
+// The loops everything is built from: run a functor for every index, reduce
+// functor results over every index, and accumulate per-index contributions in
+// place, on any backend.
 //
 // Functors are written once, marked EMF_HD, and capture views (raw pointers
 // and sizes), never containers.
@@ -8,6 +9,7 @@
 #include <cstdint>
 
 #include <thrust/for_each.h>
+#include <thrust/host_vector.h>
 #include <thrust/iterator/counting_iterator.h>
 #include <thrust/transform_reduce.h>
 
@@ -29,6 +31,66 @@ T transform_reduce_index(const B& backend, Index n, F f, T init, Op op) {
   if (n <= 0) return init;
   return thrust::transform_reduce(backend.policy(), thrust::counting_iterator<Index>(0),
                                   thrust::counting_iterator<Index>(n), f, init, op);
+}
+
+namespace detail {
+/// One CPU chunk of accumulate_index: indices [c * n / chunks, (c + 1) * n / chunks).
+template <class Index, class T, class F>
+struct AccumulateChunk {
+  F f;
+  T zero;
+  T* partial;
+  Index n, chunks;
+  void operator()(Index c) const {
+    T acc = zero;
+    const Index begin = Index(std::int64_t(c) * n / chunks), end = Index(std::int64_t(c + 1) * n / chunks);
+    for (Index i = begin; i < end; ++i) f(i, acc);
+    partial[c] = acc;
+  }
+};
+/// One index of accumulate_index on a device: its contribution alone.
+template <class T, class F>
+struct AccumulateOne {
+  F f;
+  T zero;
+  template <class Index>
+  EMF_HD T operator()(Index i) const {
+    T acc = zero;
+    f(i, acc);
+    return acc;
+  }
+};
+struct AddInPlace {
+  template <class T>
+  EMF_HD T operator()(T a, const T& b) const {
+    return a += b;
+  }
+};
+}  // namespace detail
+
+/// Returns the sum of every index's contribution over [0, n), where f(i, acc)
+/// adds index i's contribution into `acc` in place (T has `+=`). `zero` is the
+/// empty sum: every partial sum starts from it, so it must be the identity
+/// of `+=`, not a starting value. On the CPU a
+/// fixed number of chunks each accumulate sequentially: an index that adds
+/// nothing costs nothing, large accumulators are not copied per index, and
+/// the sum does not depend on the number of threads. On a device it is a
+/// transform_reduce of each index's contribution.
+template <Backend B, class Index, class T, class F>
+T accumulate_index(const B& backend, Index n, F f, const T& zero) {
+  if (n <= 0) return zero;
+  if constexpr (B::is_device) {
+    return thrust::transform_reduce(backend.policy(), thrust::counting_iterator<Index>(0),
+                                    thrust::counting_iterator<Index>(n), detail::AccumulateOne<T, F>{f, zero}, zero,
+                                    detail::AddInPlace{});
+  } else {
+    const Index chunks = n < Index(128) ? n : Index(128);
+    thrust::host_vector<T> partial(std::size_t(chunks), zero);
+    for_each_index(backend, chunks, detail::AccumulateChunk<Index, T, F>{f, zero, partial.data(), n, chunks});
+    T sum = zero;
+    for (Index c = 0; c < chunks; ++c) sum += partial[std::size_t(c)];
+    return sum;
+  }
 }
 
 }  // namespace emfusion

@@ -5,8 +5,8 @@
 // Plain loops, no graphics library; text comes from a 5x7 bitmap font
 // defined here (upper-case letters, digits and a few symbols).
 //
-//   segmentation_overlay  labels of System::segmentation() (-1 nothing
-//                         rendered, 0 background, k + 1 object k) as colours
+//   segmentation_overlay  labels of System::segmentation() (-1 no object
+//                         and no depth, 0 background, k + 1 object k) as colours
 //                         over the frame
 //   association_heatmap   an association image (0..1) through a viridis-like
 //                         colour map
@@ -239,11 +239,11 @@ inline Rgb8 label_colour(int k) {
 /// The canvas of segmentation_overlay when there is no colour image.
 inline constexpr Rgb8 overlay_gray{128, 128, 128};
 
-/// The segmentation `labels` (-1 nothing rendered, 0 background, k + 1
+/// The segmentation `labels` (-1 no object and no depth, 0 background, k + 1
 /// object k, as System::segmentation()) drawn over `colour` (nullptr: a
 /// uniform gray canvas, overlay_gray):
 ///   - background (0): the colour pixel unchanged;
-///   - nothing rendered (any negative label): the colour pixel at 35% brightness;
+///   - nothing (any negative label): the colour pixel at 35% brightness;
 ///   - object k: the colour pixel blended with label_colour(k), `opacity` of
 ///     the label colour; its boundary pixels (those with a 4-neighbour of
 ///     another label) in the solid label colour, a 1-pixel outline inside

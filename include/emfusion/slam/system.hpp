@@ -260,7 +260,9 @@ struct NearestObject {
 };
 
 /// The background wins a pixel where no object was drawn, or where the
-/// object lies more than `margin` behind the background surface.
+/// object lies more than `margin` behind the background surface (rendered
+/// only where objects were drawn). Pixels without an object are background
+/// where the frame has a point, and nothing (-1) elsewhere.
 template <class S>
 struct ResolveBackground {
   ImageView<const S> background;  // empty when there are no objects
@@ -269,10 +271,12 @@ struct ResolveBackground {
   S margin;
   ImageView<const Vec3<S>> points;
   EMF_HD void operator()(int i) const {
-    const S bg = background.empty() ? S(0) : background[i];
-    const bool has_bg = background.empty() ? is_valid(points[i]) : bg > S(0);
-    if (label[i] > 0 && (!(bg > S(0)) || object_depth[i] <= bg + margin)) return;
-    label[i] = has_bg ? 0 : -1;
+    if (label[i] > 0) {
+      const S bg = background.empty() ? S(0) : background[i];
+      if (bg > S(0) && object_depth[i] > bg + margin) label[i] = 0;
+      return;
+    }
+    label[i] = is_valid(points[i]) ? 0 : -1;
   }
 };
 
@@ -395,7 +399,7 @@ class System {
   const std::vector<ObjectRecord>& object_records() const { return records_; }
   /// The association images of the last frame: [0] background, [k + 1] objects()[k] (before deletions).
   const Associations<S, B>& associations() const { return associations_; }
-  /// Per pixel: -1 nothing rendered, 0 background, k + 1 objects()[k] (rendered at the final poses).
+  /// Per pixel: -1 no object drawn and no depth, 0 background, k + 1 objects()[k] (rendered at the final poses).
   const Image<int, B>& segmentation() const { return segmentation_; }
   /// The preprocessed frame as camera-frame points.
   const Image<Vec3<S>, B>& points() const { return points_; }
@@ -532,7 +536,7 @@ class System {
     e_ms += clock.lap();
     const HuberNorm<S> bg_norm{params_.huber_voxels * background_.voxel_size()};
     const SE3<S> T_solved = align_to_volume(background_, points_, association_weights(0), T_world_camera_, bg_norm,
-                                            align, params_.lm, &result.camera);
+                                            align, params_.lm, &result.camera, &solve_cache_);
     result.camera_step = detail::system::step_between(T_world_camera_, T_solved);
     result.camera_tracking = detail::system::tracking_outcome(result.camera, double(params_.min_camera_terms), T_solved,
                                                               result.camera_step, params_.max_camera_motion);
@@ -555,7 +559,8 @@ class System {
         // relative to the camera.
         const SE3<S> T_volume_camera =
             align_in_volume(o.volume(), points_, association_weights(int(k) + 1),
-                            o.volume().pose().inverse() * T_world_camera_, norm, obj_align, params_.lm, &report);
+                            o.volume().pose().inverse() * T_world_camera_, norm, obj_align, params_.lm, &report,
+                            &solve_cache_);
         const SE3<S> T_world_object = T_world_camera_ * T_volume_camera.inverse() * o.T_object_volume().inverse();
         ObjectTrack& t = object_tracks_[k];
         t.step = detail::system::step_between(o.pose(), T_world_object);
@@ -581,8 +586,8 @@ class System {
       segmentation_ = Image<int, B>(w, h, -1, backend_);
       object_depth_ = Image<S, B>(w, h, S(0), backend_);
     }
-    if (!objects_.empty()) raycast(background_, camera_, T_world_camera_, background_render_, rp);
-    // Nearest object per pixel first, then the background rule.
+    // Nearest object per pixel first; then the background, rendered only
+    // where an object was drawn (elsewhere nothing competes with it).
     object_depth_.fill(S(0));
     segmentation_.fill(-1);
     for (std::size_t k = 0; k < objects_.size(); ++k) {
@@ -593,13 +598,15 @@ class System {
                      detail::system::NearestObject<S>{std::as_const(o).rendering().depth.view(), object_depth_.view(),
                                    segmentation_.view(), int(k) + 1});
     }
+    if (!objects_.empty())
+      raycast(background_, camera_, T_world_camera_, background_render_, rp,
+              static_cast<const ForegroundCounts<S, B>*>(nullptr), &std::as_const(object_depth_));
     const ImageView<const S> bg =
         objects_.empty() ? ImageView<const S>{} : std::as_const(background_render_).depth.view();
     for_each_index(backend_, w * h,
                    detail::system::ResolveBackground<S>{bg, std::as_const(object_depth_).view(), segmentation_.view(),
                                      params_.occlusion_margin, points_.view()});
   }
-
 
   /// Pixel thresholds are given for 640x480 images.
   int min_mask_pixels() const {
@@ -893,6 +900,7 @@ class System {
   Image<Vec3<S>, B> points_;
   Associations<S, B> associations_;
   RaycastResult<S, B> background_render_;
+  LinearizationCache<S, B> solve_cache_;  ///< per-term buffers, shared by the solves one after another
   Image<S, B> object_depth_;
   Image<int, B> segmentation_;
 };

@@ -10,6 +10,7 @@
 #include <cmath>
 #include <concepts>
 #include <cstdint>
+#include <type_traits>
 
 #include "emfusion/core/backend.hpp"
 #include "emfusion/core/host_device.hpp"
@@ -74,10 +75,6 @@ struct NormalEquations6 {
   EMF_HD Vec6<double> gradient() const { return Vec6<double>{{g[0], g[1], g[2], g[3], g[4], g[5]}}; }
 };
 
-struct SumNormalEquations {
-  EMF_HD NormalEquations6 operator()(NormalEquations6 a, const NormalEquations6& b) const { return a += b; }
-};
-
 /// A least-squares problem over a pose, one term per index: `term` gives the
 /// residual, its Jacobian with respect to a left perturbation exp(xi) * T and
 /// a fixed weight (>= 0), or false if the term does not take part at T.
@@ -89,6 +86,53 @@ concept PoseTerms = std::copy_constructible<P> && requires(const P& p, int i, co
   { p.term(i, T, r, J, w) } -> std::convertible_to<bool>;
 };
 
+/// A term's residual and fixed weight at one pose; w < 0: it did not take part.
+template <class S>
+struct TermValue {
+  S r, w;
+};
+
+/// Each term's residual and weight from the last two linearisations, with
+/// their poses. A linearisation whose reference pose is one of them reads the
+/// reference's values instead of evaluating every term a second time:
+/// Levenberg-Marquardt compares each candidate with the current pose, which
+/// was linearised before, so this halves a solve's work. Keep one per solve
+/// in flight and call reset() when the terms' data change (a new frame);
+/// reusing it across solves avoids allocations.
+template <class S, Backend B>
+class LinearizationCache {
+ public:
+  void reset() { filled_[0] = filled_[1] = false; }
+
+  /// The slot holding values at exactly pose T, or -1.
+  int find(const SE3<S>& T) const {
+    for (int k = 0; k < 2; ++k)
+      if (filled_[k] && same(poses_[k], T)) return k;
+    return -1;
+  }
+  /// Slot k sized for n terms, marked empty until filled(k, T).
+  TermValue<S>* begin_write(int k, int n) {
+    filled_[k] = false;
+    if (int(values_[k].size()) != n) values_[k].resize(std::size_t(n));
+    return thrust::raw_pointer_cast(values_[k].data());
+  }
+  void filled(int k, const SE3<S>& T) { poses_[k] = T, filled_[k] = true; }
+  const TermValue<S>* values(int k) const { return thrust::raw_pointer_cast(values_[k].data()); }
+
+ private:
+  static bool same(const SE3<S>& a, const SE3<S>& b) {
+    for (int r = 0; r < 3; ++r) {
+      if (a.translation()[r] != b.translation()[r]) return false;
+      for (int c = 0; c < 3; ++c)
+        if (a.rotation()(r, c) != b.rotation()(r, c)) return false;
+    }
+    return true;
+  }
+  typename B::template Vector<TermValue<S>> values_[2];
+  SE3<S> poses_[2];
+  bool filled_[2] = {false, false};
+};
+
 namespace detail {
 template <class S, class P, class N>
 struct LinearizeTerm {
@@ -97,22 +141,32 @@ struct LinearizeTerm {
   SE3<S> T;
   SE3<S> reference;
   bool has_reference;
-  EMF_HD NormalEquations6 operator()(int i) const {
-    NormalEquations6 n = NormalEquations6::zero();
+  TermValue<S>* store = nullptr;                   ///< each term's value at T, when set
+  const TermValue<S>* stored_reference = nullptr;  ///< the values at the reference, when known
+
+  /// Adds term i (nothing when it does not take part) into n.
+  EMF_HD void operator()(int i, NormalEquations6& n) const {
     S r, w;
     Vec6<S> J;
-    if (!problem.term(i, T, r, J, w) || !(w > S(0))) return n;
+    const bool valid = problem.term(i, T, r, J, w) && w > S(0);
+    if (store) store[i] = valid ? TermValue<S>{r, w} : TermValue<S>{S(0), S(-1)};
+    if (!valid) return;
     const S c = w * norm.cost(r);
     n.add(J, r, w * norm.weight(r), c);
+    if (!has_reference) return;
     S r0, w0;
-    if (has_reference && problem.term(i, reference, r0, J, w0) && w0 > S(0)) {
+    if (stored_reference) {
+      r0 = stored_reference[i].r, w0 = stored_reference[i].w;
+    } else if (!problem.term(i, reference, r0, J, w0)) {
+      return;
+    }
+    if (w0 > S(0)) {
       // Both with the weight at the reference: IRLS holds weights fixed
       // within a step, and weights that vary with the pose (the map
       // confidence) would otherwise make the cost change disagree with g.
-      n.shared_cost = double(w0 * norm.cost(r));
-      n.shared_reference_cost = double(w0 * norm.cost(r0));
+      n.shared_cost += double(w0 * norm.cost(r));
+      n.shared_reference_cost += double(w0 * norm.cost(r0));
     }
-    return n;
   }
 };
 }  // namespace detail
@@ -123,9 +177,26 @@ struct LinearizeTerm {
 template <class S, Backend B, class P, class N>
   requires PoseTerms<P, S> && RobustNorm<N, S>
 NormalEquations6 linearize(const B& backend, const P& problem, const N& norm, const SE3<S>& T,
-                           const SE3<S>* reference = nullptr) {
+                           const std::type_identity_t<SE3<S>>* reference = nullptr) {
   const detail::LinearizeTerm<S, P, N> f{problem, norm, T, reference ? *reference : T, reference != nullptr};
-  return transform_reduce_index(backend, problem.term_count(), f, NormalEquations6::zero(), SumNormalEquations{});
+  return accumulate_index(backend, problem.term_count(), f, NormalEquations6::zero());
+}
+
+/// The same, remembering the terms' values at T in `cache` and reading the
+/// reference's values from it when it holds them (bit-identical results).
+template <class S, Backend B, class P, class N>
+  requires PoseTerms<P, S> && RobustNorm<N, S>
+NormalEquations6 linearize(const B& backend, const P& problem, const N& norm, const SE3<S>& T,
+                           const std::type_identity_t<SE3<S>>* reference, LinearizationCache<S, B>& cache) {
+  const int n = problem.term_count();
+  const int read = reference ? cache.find(*reference) : -1;
+  const int write = read == 0 ? 1 : 0;
+  detail::LinearizeTerm<S, P, N> f{problem, norm, T, reference ? *reference : T, reference != nullptr};
+  f.store = cache.begin_write(write, n);
+  if (read >= 0) f.stored_reference = cache.values(read);
+  const NormalEquations6 result = accumulate_index(backend, n, f, NormalEquations6::zero());
+  cache.filled(write, T);
+  return result;
 }
 
 /// Solves (H + lambda I) x = -g by Cholesky; false if the matrix is not

@@ -115,17 +115,21 @@ SdfAlignmentTerms<S, Store> make_sdf_alignment(const TsdfVolume<S, B, Store>& vo
 /// volume's frame with Levenberg-Marquardt, starting at `T_volume_camera`;
 /// returns the solved T_volume_camera. Use it when the volume's own pose is
 /// what is estimated (a moving object): it avoids a round trip through the
-/// volume's world pose.
+/// volume's world pose. `cache` (optional) keeps the per-term buffers of
+/// the solve between calls, saving their allocation (LinearizationCache).
 template <class S, Backend B, class Store, class Norm>
   requires RobustNorm<Norm, S>
 SE3<S> align_in_volume(const TsdfVolume<S, B, Store>& volume, const Image<Vec3<S>, B>& points,
                        const Image<S, B>* association, const SE3<S>& T_volume_camera, const Norm& norm,
                        const SdfAlignmentParams<S>& params = {}, const LevenbergMarquardtParams& lm = {},
-                       SolveReport* report = nullptr) {
+                       SolveReport* report = nullptr, LinearizationCache<S, B>* cache = nullptr) {
   const auto terms = make_sdf_alignment(volume, points, association, params);
   const B& backend = volume.backend();
+  LinearizationCache<S, B> local;
+  LinearizationCache<S, B>& values = cache ? *cache : local;
+  values.reset();
   const auto lin = [&](const SE3<S>& T, const SE3<S>* reference) {
-    return linearize(backend, terms, norm, T, reference);
+    return linearize(backend, terms, norm, T, reference, values);
   };
   return levenberg_marquardt(lin, T_volume_camera, lm, report);
 }
@@ -137,9 +141,9 @@ template <class S, Backend B, class Store, class Norm>
 SE3<S> align_to_volume(const TsdfVolume<S, B, Store>& volume, const Image<Vec3<S>, B>& points,
                        const Image<S, B>* association, const SE3<S>& T_world_camera, const Norm& norm,
                        const SdfAlignmentParams<S>& params = {}, const LevenbergMarquardtParams& lm = {},
-                       SolveReport* report = nullptr) {
+                       SolveReport* report = nullptr, LinearizationCache<S, B>* cache = nullptr) {
   return volume.pose() * align_in_volume(volume, points, association, volume.pose().inverse() * T_world_camera,
-                                         norm, params, lm, report);
+                                         norm, params, lm, report, cache);
 }
 
 }  // namespace emfusion

@@ -29,6 +29,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <string>
 #include <utility>
 
@@ -71,6 +72,42 @@ struct IntegrationParams {
 
 namespace detail {
 
+/// Narrows [z_begin, z_end) to the voxels of the column p(z) = start + z step
+/// (camera frame) that can project into the image with positive depth. Each
+/// side of the frustum is a plane through the camera, a linear constraint
+/// c0 + c1 z >= 0 along the column, and so is the far plane z <= far (the
+/// deepest measurement plus the truncation: voxels beyond are never
+/// updated). The planes lie a pixel outside the image and the range is
+/// widened by a voxel, so the per-voxel tests still decide. False when no
+/// voxel remains.
+template <class S>
+EMF_HD bool clip_column_to_frustum(const PinholeCamera<S>& camera, const Vec3<S>& start, const Vec3<S>& step, S far,
+                                   int& z_begin, int& z_end) {
+  const S u_lo = -S(1.5), u_hi = S(camera.width) + S(0.5), v_lo = -S(1.5), v_hi = S(camera.height) + S(0.5);
+  // Planes a . p >= 0: z > 0, u >= u_lo, u <= u_hi, v >= v_lo, v <= v_hi.
+  const Vec3<S> planes[5] = {vec3(S(0), S(0), S(1)), vec3(camera.fx, S(0), camera.cx - u_lo),
+                             vec3(-camera.fx, S(0), u_hi - camera.cx), vec3(S(0), camera.fy, camera.cy - v_lo),
+                             vec3(S(0), -camera.fy, v_hi - camera.cy)};
+  S lo = S(z_begin), hi = S(z_end);
+  for (int k = 0; k < 6; ++k) {
+    const Vec3<S> a = k < 5 ? planes[k] : vec3(S(0), S(0), -S(1));
+    const S c0 = dot(a, start) + (k < 5 ? S(0) : far), c1 = dot(a, step);
+    if (c1 > S(0)) {
+      const S z = -c0 / c1 - S(1);
+      lo = z > lo ? z : lo;
+    } else if (c1 < S(0)) {
+      const S z = -c0 / c1 + S(2);
+      hi = z < hi ? z : hi;
+    } else if (c0 < S(0)) {
+      return false;
+    }
+    if (!(lo < hi)) return false;
+  }
+  z_begin = int(std::ceil(lo));
+  z_end = int(std::ceil(hi));
+  return z_begin < z_end;
+}
+
 /// Integrates one column of voxels (x, y, all z): consecutive z share the
 /// ray arithmetic, and neighbouring threads touch neighbouring voxels.
 template <class S, class Store>
@@ -83,13 +120,16 @@ struct IntegrateColumn {
   PinholeCamera<S> camera;
   SE3<S> T_camera_volume;
   IntegrationParams<S> params;
+  S far;  ///< no voxel deeper than this (camera z) is updated
 
   EMF_HD void operator()(int column) const {
     const int x = column % volume.nx, y = column / volume.nx;
     const Vec3<S> start = T_camera_volume * volume.voxel_center(x, y, 0);
     const Vec3<S> step = T_camera_volume.rotate(vec3(S(0), S(0), volume.voxel_size));
     const S trunc = volume.truncation;
-    for (int z = 0; z < volume.nz; ++z) {
+    int z_begin = 0, z_end = volume.nz;
+    if (!clip_column_to_frustum(camera, start, step, far, z_begin, z_end)) return;
+    for (int z = z_begin; z < z_end; ++z) {
       const Vec3<S> p = start + S(z) * step;
       if (!(p.z() > S(0))) continue;
       const Vec2<S> uv = camera.project(p);
@@ -184,22 +224,48 @@ struct NearestDepthPass {
   EMF_HD void operator()(int i) const {
     const int u = i % depth.width, v = i / depth.width;
     const S d = depth[i];
-    S nearest = is_valid_depth(in[i]) ? in[i] : S(0);
+    // +inf stands for "none yet"; the comparisons skip holes, NaN and inf.
+    const S none = std::numeric_limits<S>::infinity();
+    const S own = in[i];
+    S nearest = own > S(0) && own < none ? own : none;
     if (is_valid_depth(d)) {
       const S r = std::ceil(lateral_pixels_at_1m / d);
       const int radius = r < S(max_radius) ? int(r) : max_radius;
-      for (int k = -radius; k <= radius; ++k) {
-        const int x = u + k * dx, y = v + k * dy;
-        if (!in.contains(x, y)) continue;
-        const S n = in(x, y);
-        if (is_valid_depth(n) && (nearest == S(0) || n < nearest)) nearest = n;
+      // The window clipped to the image once, so the loop has no branches.
+      const int at = dx ? u : v, size = dx ? in.width : in.height;
+      const int k0 = at - radius < 0 ? -at : -radius;
+      const int k1 = at + radius >= size ? size - 1 - at : radius;
+      const S* p = &in(u, v);
+      const int stride = dx ? 1 : in.width;
+      for (int k = k0; k <= k1; ++k) {
+        const S n = p[k * stride];
+        nearest = n > S(0) && n < nearest ? n : nearest;
       }
     }
-    out[i] = nearest;
+    out[i] = nearest < none ? nearest : S(0);
   }
 };
 
 }  // namespace detail
+
+namespace detail {
+template <class S>
+struct ValidDepthOrZero {
+  ImageView<const S> depth;
+  EMF_HD S operator()(int i) const { return is_valid_depth(depth[i]) ? depth[i] : S(0); }
+};
+template <class S>
+struct Larger {
+  EMF_HD S operator()(S a, S b) const { return a > b ? a : b; }
+};
+}  // namespace detail
+
+/// The largest valid depth of an image (0 when it has none).
+template <class S, Backend B>
+S max_valid_depth(const Image<S, B>& depth) {
+  return transform_reduce_index(depth.backend(), depth.size(), detail::ValidDepthOrZero<S>{depth.view()}, S(0),
+                                detail::Larger<S>{});
+}
 
 /// Fuses `depth` (metres, 0 = invalid), seen by `camera` at `T_world_camera`,
 /// into `volume`. `weights`, if non-empty, gives q(u) per pixel and must have
@@ -241,7 +307,9 @@ void integrate(TsdfVolume<S, B, Store>& volume, const Image<S, B>& depth, const 
                                       std::as_const(near_depth).view(),
                                       camera,
                                       T_world_camera.inverse() * volume.pose(),
-                                      params};
+                                      params,
+                                      max_valid_depth(depth) + volume.truncation()};
+  if (!(f.far > volume.truncation())) return;  // no measurement at all
   for_each_index(volume.backend(), volume.dims()[0] * volume.dims()[1], f);
 }
 

@@ -85,6 +85,7 @@ struct RaycastPixel {
   ImageView<Vec3<S>> normals;
   ImageView<std::uint8_t> hit;
   ForegroundView<S, const float> foreground;  // empty: every crossing counts
+  ImageView<const S> only_where;              // empty: every pixel; else rays only where > 0
 
   EMF_HD void miss(int i) const {
     const S nan = std::numeric_limits<S>::quiet_NaN();
@@ -95,6 +96,10 @@ struct RaycastPixel {
   }
 
   EMF_HD void operator()(int i) const {
+    if (!only_where.empty() && !(only_where[i] > S(0))) {
+      miss(i);
+      return;
+    }
     const int u = i % camera.width, v = i / camera.width;
     const Vec3<S> ray_cam = normalized(camera.ray(S(u), S(v)));  // z = cos of the off-axis angle
     const Vec3<S> origin = T_volume_camera.translation();
@@ -175,17 +180,23 @@ struct RaycastPixel {
 /// Renders `volume` into `camera` at `T_world_camera`; writes into `out`
 /// (allocated on the volume's backend as needed). With `foreground` (an
 /// object's counts, same grid), only surfaces with p_fg > min_foreground.
+/// With `only_where` (an image of the camera's size), rays are cast only
+/// where it is positive; every other pixel is a miss.
 template <class S, Backend B, class Store>
 void raycast(const TsdfVolume<S, B, Store>& volume, const PinholeCamera<S>& camera, const SE3<S>& T_world_camera,
              RaycastResult<S, B>& out, const RaycastParams<S>& params = {},
-             const ForegroundCounts<S, B>* foreground = nullptr) {
+             const ForegroundCounts<S, B>* foreground = nullptr, const Image<S, B>* only_where = nullptr) {
   camera.validate("raycast");
   detail::require(params.min_depth >= S(0) && params.max_depth > params.min_depth, "raycast",
                   "need 0 <= min_depth < max_depth");
   out.resize(camera.width, camera.height, volume.backend());
   detail::RaycastPixel<S, Store> f{volume.view(),       camera,          volume.pose().inverse() * T_world_camera,
                                    params,              out.depth.view(), out.vertices.view(),
-                                   out.normals.view(),  out.hit.view(),   {}};
+                                   out.normals.view(),  out.hit.view(),   {}, {}};
+  if (only_where) {
+    detail::require_image(only_where->view(), camera.width, camera.height, "raycast", "only_where image");
+    f.only_where = only_where->view();
+  }
   if (foreground) {
     detail::require(foreground->dims()[0] == volume.dims()[0] && foreground->dims()[1] == volume.dims()[1] &&
                         foreground->dims()[2] == volume.dims()[2],

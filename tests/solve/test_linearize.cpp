@@ -1,0 +1,141 @@
+// The accumulation behind every linearisation: accumulate_index (in-place
+// per-index contributions, chunked on the CPU) and LinearizationCache (the
+// reference pose's term values reused), which must change nothing but speed.
+#include <cmath>
+#include <cstring>
+#include <random>
+#include <vector>
+
+#include "emfusion/core/image.hpp"
+#include "emfusion/core/parallel.hpp"
+#include "emfusion/solve/normal_equations.hpp"
+#include "emfusion/solve/solvers.hpp"
+#include "support/catch.hpp"
+#include "support/configs.hpp"
+
+using namespace emfusion;
+
+namespace {
+
+struct SumCount {
+  double sum = 0, count = 0;
+  EMF_HD SumCount& operator+=(const SumCount& o) {
+    sum += o.sum, count += o.count;
+    return *this;
+  }
+};
+
+/// Adds i for every index divisible by 3.
+struct AddMultiplesOfThree {
+  EMF_HD void operator()(int i, SumCount& acc) const {
+    if (i % 3 != 0) return;
+    acc.sum += double(i);
+    acc.count += 1;
+  }
+};
+
+/// Point-to-point terms, three per point, with weights that vary per point;
+/// a point whose transformed z falls below `min_z` does not take part, so the
+/// valid set changes with the pose.
+template <class S>
+struct ClippedPointToPoint {
+  ImageView<const Vec3<S>> source, target;
+  S min_z;
+  EMF_HD int term_count() const { return 3 * source.size(); }
+  EMF_HD bool term(int i, const SE3<S>& T, S& r, Vec6<S>& J, S& w) const {
+    const int k = i / 3, axis = i % 3;
+    const Vec3<S> x = T * source[k];
+    if (x.z() < min_z) return false;
+    r = x[axis] - target[k][axis];
+    const auto Jx = SE3<S>::left_jacobian_of_action(x);
+    for (int j = 0; j < 6; ++j) J[j] = Jx(axis, j);
+    w = S(0.5) + S(k % 5) / S(4);
+    return true;
+  }
+};
+
+template <class S, class B>
+struct Points {
+  Image<Vec3<S>, B> source, target;
+  SE3<S> truth = SE3<S>::exp(Vec6<S>{{S(0.05), S(-0.04), S(0.03), S(0.06), S(-0.05), S(0.04)}});
+  explicit Points(int n) {
+    std::mt19937 rng(7);
+    std::uniform_real_distribution<double> u(-1, 1);
+    std::vector<Vec3<S>> s, t;
+    for (int i = 0; i < n; ++i) {
+      s.push_back(vec3(S(u(rng)), S(u(rng)), S(2 + u(rng))));
+      t.push_back(truth * s.back() + vec3(S(0.01 * u(rng)), S(0.01 * u(rng)), S(0.01 * u(rng))));
+    }
+    source = Image<Vec3<S>, Host>::from_host(n, 1, s).template to<B>();
+    target = Image<Vec3<S>, Host>::from_host(n, 1, t).template to<B>();
+  }
+  ClippedPointToPoint<S> problem() const { return {source.view(), target.view(), S(1.2)}; }
+};
+
+bool same_bits(const NormalEquations6& a, const NormalEquations6& b) {
+  return std::memcmp(&a, &b, sizeof(NormalEquations6)) == 0;
+}
+
+}  // namespace
+
+TEMPLATE_LIST_TEST_CASE("accumulate_index adds in-place contributions of every index once", "[solve]",
+                        emfusion::test::AllConfigs) {
+  using B = typename TestType::Backend;
+  const B backend{};
+  for (const int n : {0, 1, 2, 5, 127, 128, 129, 100003}) {
+    const SumCount s = accumulate_index(backend, n, AddMultiplesOfThree{}, SumCount{});
+    double sum = 0, count = 0;
+    for (int i = 0; i < n; i += 3) sum += double(i), count += 1;
+    INFO("n = " << n);
+    CHECK(s.sum == sum);
+    CHECK(s.count == count);
+  }
+}
+
+TEMPLATE_LIST_TEST_CASE("Linearising with a cache gives bit-identical normal equations", "[solve]",
+                        emfusion::test::AllConfigs) {
+  using S = typename TestType::Scalar;
+  using B = typename TestType::Backend;
+  const B backend{};
+  const Points<S, B> points(3000);
+  const auto problem = points.problem();
+  const HuberNorm<S> norm{S(0.005)};
+  const SE3<S> A = SE3<S>::exp(Vec6<S>{{S(0.01), S(0.02), S(-0.3), S(0.02), S(0.01), S(0.0)}});
+  const SE3<S> Bp = SE3<S>::exp(Vec6<S>{{S(0.03), S(0.0), S(-0.25), S(0.03), S(0.02), S(0.01)}});
+  const SE3<S> C = SE3<S>::exp(Vec6<S>{{S(0.04), S(-0.01), S(-0.2), S(0.04), S(0.0), S(0.02)}});
+
+  LinearizationCache<S, B> cache;
+  CHECK(cache.find(A) == -1);
+  // No reference: plain linearisation, values of A remembered.
+  CHECK(same_bits(linearize(backend, problem, norm, A, nullptr, cache), linearize(backend, problem, norm, A)));
+  CHECK(cache.find(A) >= 0);
+  // Reference A from the cache, and B remembered beside it.
+  const NormalEquations6 b_cached = linearize(backend, problem, norm, Bp, &A, cache);
+  const NormalEquations6 b_plain = linearize(backend, problem, norm, Bp, &A);
+  CHECK(b_plain.shared_cost > 0);
+  CHECK(b_plain.shared_reference_cost != b_plain.shared_cost);
+  CHECK(same_bits(b_cached, b_plain));
+  CHECK(cache.find(A) >= 0);
+  CHECK(cache.find(Bp) >= 0);
+  // Reference B (cached) and then a reference the cache does not hold.
+  CHECK(same_bits(linearize(backend, problem, norm, C, &Bp, cache), linearize(backend, problem, norm, C, &Bp)));
+  const SE3<S> unseen = SE3<S>::exp(Vec6<S>{{S(0.02), S(0.0), S(-0.1), S(0.0), S(0.0), S(0.0)}});
+  CHECK(cache.find(unseen) == -1);
+  CHECK(same_bits(linearize(backend, problem, norm, A, &unseen, cache), linearize(backend, problem, norm, A, &unseen)));
+  cache.reset();
+  CHECK(cache.find(A) == -1);
+
+  // A whole Levenberg-Marquardt solve takes the same steps either way.
+  const auto plain = [&](const SE3<S>& T, const SE3<S>* ref) { return linearize(backend, problem, norm, T, ref); };
+  const auto cached = [&](const SE3<S>& T, const SE3<S>* ref) {
+    return linearize(backend, problem, norm, T, ref, cache);
+  };
+  SolveReport r_plain, r_cached;
+  const SE3<S> p = levenberg_marquardt(plain, SE3<S>::identity(), {}, &r_plain);
+  const SE3<S> q = levenberg_marquardt(cached, SE3<S>::identity(), {}, &r_cached);
+  CHECK(r_plain.iterations > 2);
+  CHECK(r_plain.iterations == r_cached.iterations);
+  CHECK(r_plain.accepted_steps == r_cached.accepted_steps);
+  CHECK(max_abs_diff(p.matrix(), q.matrix()) == S(0));
+  CHECK(max_abs_diff(p.matrix(), points.truth.matrix()) < S(0.01));
+}

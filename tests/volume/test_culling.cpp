@@ -1,0 +1,140 @@
+// Work the volume kernels skip must be work that changes nothing: the
+// frustum and far-plane range of an integrated voxel column, the silhouette
+// guard's minimum filter, and raycasting only where asked.
+#include <cmath>
+#include <limits>
+#include <random>
+#include <stdexcept>
+#include <vector>
+
+#include "emfusion/volume/integrate.hpp"
+#include "emfusion/volume/raycast.hpp"
+#include "support/catch.hpp"
+#include "support/configs.hpp"
+#include "support/fusion.hpp"
+
+using namespace emfusion;
+
+TEMPLATE_TEST_CASE("A column's frustum range holds every voxel that projects into the image", "[volume]", float,
+                   double) {
+  using S = TestType;
+  const PinholeCamera<S> camera{S(525), S(525), S(319.5), S(239.5), 640, 480};
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<double> u(-1, 1);
+  const int nz = 200;
+  const S voxel = S(0.02);
+  int columns_with_voxels = 0, skipped = 0;
+  for (int trial = 0; trial < 3000; ++trial) {
+    const SE3<S> T = SE3<S>::exp(Vec6<S>{{S(2 * u(rng)), S(2 * u(rng)), S(2 * u(rng)), S(2 * u(rng)), S(2 * u(rng)),
+                                          S(2 * u(rng))}});
+    const Vec3<S> start = T * vec3(S(u(rng)), S(u(rng)), S(-2));
+    const Vec3<S> step = T.rotate(vec3(S(0), S(0), voxel));
+    const S far = trial % 2 ? S(2.5) : std::numeric_limits<S>::infinity();
+    int z_begin = 0, z_end = nz;
+    const bool any = detail::clip_column_to_frustum(camera, start, step, far, z_begin, z_end);
+    bool inside_any = false;
+    for (int z = 0; z < nz; ++z) {
+      const Vec3<S> p = start + S(z) * step;
+      if (!(p.z() > S(0)) || p.z() > far) continue;
+      const Vec2<S> uv = camera.project(p);
+      const int pu = int(std::floor(uv.x() + S(0.5))), pv = int(std::floor(uv.y() + S(0.5)));
+      if (pu < 0 || pv < 0 || pu >= camera.width || pv >= camera.height) continue;
+      inside_any = true;
+      INFO("trial " << trial << ", voxel " << z << " projects to (" << pu << ", " << pv << ")");
+      REQUIRE(any);
+      REQUIRE(z >= z_begin);
+      REQUIRE(z < z_end);
+    }
+    if (inside_any) ++columns_with_voxels;
+    skipped += any ? nz - (z_end - z_begin) : nz;
+  }
+  // The test must see both kinds of column, and the range must cut work.
+  CHECK(columns_with_voxels > 300);
+  CHECK(skipped > 3000 * nz / 4);
+}
+
+TEMPLATE_TEST_CASE("max_valid_depth ignores holes, NaN and infinities", "[volume]", float, double) {
+  using S = TestType;
+  const S nan = std::numeric_limits<S>::quiet_NaN(), inf = std::numeric_limits<S>::infinity();
+  const auto image = Image<S, Host>::from_host(3, 2, {S(1.5), nan, inf, S(-7), S(0), S(2.25)});
+  CHECK(max_valid_depth(image) == S(2.25));
+  CHECK(max_valid_depth(Image<S, Host>::from_host(2, 1, {S(0), nan})) == S(0));
+}
+
+TEMPLATE_TEST_CASE("The silhouette guard's minimum filter matches a direct search", "[volume]", float, double) {
+  using S = TestType;
+  const int w = 37, h = 23;
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<double> u(0, 1);
+  std::vector<S> pixels(std::size_t(w) * h);
+  for (S& d : pixels) {
+    const double k = u(rng);
+    d = k < 0.15 ? S(0) : k < 0.2 ? std::numeric_limits<S>::quiet_NaN() : k < 0.22 ? std::numeric_limits<S>::infinity()
+                                                                                       : S(0.3 + 3 * u(rng));
+  }
+  const auto depth = Image<S, Host>::from_host(w, h, pixels);
+  const S lateral = S(4);  // radius ceil(4 / d) pixels: 2 to 14 here
+  for (const int dx : {0, 1}) {
+    Image<S, Host> out(w, h, S(-1));
+    for_each_index(Host{}, w * h,
+                   detail::NearestDepthPass<S>{depth.view(), depth.view(), out.view(), lateral, dx, 1 - dx});
+    const auto got = out.to_host();
+    for (int v = 0; v < h; ++v)
+      for (int x = 0; x < w; ++x) {
+        const S d = pixels[std::size_t(v) * w + x];
+        S nearest = is_valid_depth(d) ? d : S(0);
+        if (is_valid_depth(d)) {
+          const int radius = std::min(int(std::ceil(lateral / d)), 16);
+          for (int k = -radius; k <= radius; ++k) {
+            const int xx = x + k * dx, yy = v + k * (1 - dx);
+            if (xx < 0 || yy < 0 || xx >= w || yy >= h) continue;
+            const S n = pixels[std::size_t(yy) * w + xx];
+            if (is_valid_depth(n) && (nearest == S(0) || n < nearest)) nearest = n;
+          }
+        }
+        INFO("pixel (" << x << ", " << v << "), pass along " << (dx ? "rows" : "columns"));
+        REQUIRE(got[std::size_t(v) * w + x] == nearest);
+      }
+  }
+}
+
+TEMPLATE_LIST_TEST_CASE("Raycasting only where asked equals the full raycast there", "[volume]",
+                        emfusion::test::AllConfigs) {
+  using S = typename TestType::Scalar;
+  using B = typename TestType::Backend;
+  const auto camera = test::small_camera<S>();
+  sim::Scene<S> scene;
+  scene.add(sim::make_sphere(Vec3<S>::zero(), S(0.25)));
+  TsdfVolume<S, B> volume(test::cube_around<S>(Vec3<S>::zero(), 64, S(0.01)));
+  test::fuse_views(volume, scene, camera, test::orbit_poses<S>(Vec3<S>::zero(), S(1.2), 12));
+  const SE3<S> pose = sim::look_at<S>(vec3(S(0.8), S(-0.7), S(0.4)), Vec3<S>::zero(), vec3(S(0), S(0), S(1)));
+
+  std::vector<S> mask(std::size_t(camera.width) * camera.height, S(0));
+  for (int v = 0; v < camera.height; ++v)
+    for (int x = 0; x < camera.width / 2; ++x) mask[std::size_t(v) * camera.width + x] = S(1);
+  const auto where = Image<S, Host>::from_host(camera.width, camera.height, mask).template to<B>();
+  RaycastResult<S, B> full, part;
+  raycast(volume, camera, pose, full);
+  raycast(volume, camera, pose, part, {}, static_cast<const ForegroundCounts<S, B>*>(nullptr), &where);
+
+  const auto full_depth = full.depth.to_host(), part_depth = part.depth.to_host();
+  const auto full_hit = full.hit.to_host(), part_hit = part.hit.to_host();
+  std::size_t hits_inside = 0, hits_outside = 0;
+  for (std::size_t i = 0; i < mask.size(); ++i) {
+    if (mask[i] > S(0)) {
+      REQUIRE(part_hit[i] == full_hit[i]);
+      REQUIRE(part_depth[i] == full_depth[i]);
+      hits_inside += full_hit[i];
+    } else {
+      REQUIRE(part_hit[i] == 0);
+      REQUIRE(part_depth[i] == S(0));
+      hits_outside += full_hit[i];
+    }
+  }
+  CHECK(hits_inside > 1000);
+  CHECK(hits_outside > 1000);
+
+  const auto wrong = Image<S, Host>(camera.width + 1, camera.height, S(1)).template to<B>();
+  CHECK_THROWS_WITH(raycast(volume, camera, pose, part, {}, static_cast<const ForegroundCounts<S, B>*>(nullptr), &wrong),
+                    EMF_CONTAINS("only_where image is 201x150"));
+}
