@@ -41,7 +41,7 @@ struct Options {
 
 struct Sample {
   int frame = 0;
-  double host_mib = 0, device_mib = 0;
+  double host_mib = 0, device_mib = 0, model_mib = 0;
   int live_objects = 0, created = 0, deleted = 0;
 };
 
@@ -65,8 +65,8 @@ int run(const Options& o) {
 
   std::printf("%s, %zu frames of %dx%d, background %d^3 x %.3g m, %d moving objects\n", B::name, seq.size(),
               p.width, p.height, o.voxels, o.voxel_size, o.objects);
-  std::printf("%8s %10s %12s %6s %8s %8s %10s\n", "frame", "host MiB", "device MiB", "live", "created", "deleted",
-              "ms/frame");
+  std::printf("%8s %10s %12s %11s %6s %8s %8s %10s\n", "frame", "host MiB", "device MiB", "models MiB", "live",
+              "created", "deleted", "ms/frame");
   std::vector<Sample> samples;
   std::vector<double> frame_ms;
   int created = 0, deleted = 0;
@@ -79,13 +79,14 @@ int run(const Options& o) {
     if (i > 0) frame_ms.push_back(r.times.total);
     const int frame = int(i) + 1;
     if (frame % o.sample_every == 0 || i + 1 == seq.size()) {
-      const Sample s{frame, bench::current_host_mib(), bench::device_used_mib<B>(), r.live_objects, created, deleted};
+      const Sample s{frame,           bench::current_host_mib(), bench::device_used_mib<B>(),
+                     double(system.memory_bytes()) / 1048576.0, r.live_objects, created, deleted};
       samples.push_back(s);
       std::vector<double> recent(frame_ms.end() - std::min<std::ptrdiff_t>(std::ptrdiff_t(frame_ms.size()), o.sample_every),
                                  frame_ms.end());
       std::sort(recent.begin(), recent.end());
-      std::printf("%8d %10.1f %12.1f %6d %8d %8d %10.2f\n", s.frame, s.host_mib, s.device_mib, s.live_objects,
-                  s.created, s.deleted, recent.empty() ? 0.0 : recent[recent.size() / 2]);
+      std::printf("%8d %10.1f %12.1f %11.1f %6d %8d %8d %10.2f\n", s.frame, s.host_mib, s.device_mib, s.model_mib,
+                  s.live_objects, s.created, s.deleted, recent.empty() ? 0.0 : recent[recent.size() / 2]);
       std::fflush(stdout);
     }
   }
@@ -96,8 +97,17 @@ int run(const Options& o) {
   if (first != samples.end()) {
     host_growth = samples.back().host_mib - first->host_mib;
     device_growth = samples.back().device_mib - first->device_mib;
-    std::printf("growth from frame %d to %d: host %+.1f MiB, device %+.1f MiB\n", first->frame, samples.back().frame,
-                host_growth, device_growth);
+    std::printf("growth from frame %d to %d: host %+.1f MiB, device %+.1f MiB, models %+.1f MiB\n", first->frame,
+                samples.back().frame, host_growth, device_growth, samples.back().model_mib - first->model_mib);
+    // What the process holds beyond the models (on the CPU the models are
+    // host memory, on a device device memory).
+    double low = 1e300, high = -1e300;
+    for (auto s = first; s != samples.end(); ++s) {
+      const double beyond = (B::is_device ? s->device_mib : s->host_mib) - (B::is_device ? 0.0 : s->model_mib);
+      low = std::min(low, beyond), high = std::max(high, beyond);
+    }
+    if (!B::is_device)
+      std::printf("host memory beyond the models from frame %d on: %.1f to %.1f MiB\n", first->frame, low, high);
   } else {
     std::printf("no sample at or after the warm-up (frame %d): growth not measured\n", o.warmup);
   }
@@ -111,6 +121,7 @@ int run(const Options& o) {
   json.begin("samples");
   for (const Sample& s : samples)
     json.begin(std::to_string(s.frame)).number("host_mib", s.host_mib).number("device_mib", s.device_mib)
+        .number("model_mib", s.model_mib)
         .integer("live_objects", s.live_objects).integer("created", s.created).integer("deleted", s.deleted).end();
   json.end();
   if (system.camera_trajectory().size() >= 3) {  // the ATE needs three poses

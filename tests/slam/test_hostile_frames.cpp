@@ -519,6 +519,9 @@ TEMPLATE_LIST_TEST_CASE("Hostile frames: 100 masks per frame stay within the obj
       for (const auto& o : run.system.objects()) bytes += o->memory_bytes();
       const std::size_t side = std::size_t(p.max_object_voxels);
       CHECK(bytes <= std::size_t(cap) * side * side * side * (2 * sizeof(S) + 2 * sizeof(float)));
+      // System::memory_bytes() counts the background besides the objects.
+      const std::size_t n = std::size_t(p.background_voxels);
+      CHECK(run.system.memory_bytes() == bytes + n * n * n * 2 * sizeof(S));
       // Random objects take a share of the pixels; the camera still tracks.
       INFO("excess error " << run.excess_error(0, run.frame()));
       CHECK(run.excess_error(0, run.frame()) < 2 * recovered);

@@ -9,7 +9,10 @@
 #pragma once
 
 #include <concepts>
+#include <cstddef>
 #include <string>
+#include <utility>
+#include <vector>
 
 #include <thrust/host_vector.h>
 #include <thrust/system/cpp/execution_policy.h>
@@ -23,6 +26,10 @@
 #if EMFUSION_HAS_CUDA
 #include <cuda_runtime.h>
 #include <thrust/device_vector.h>
+
+#include <cstddef>
+#include <map>
+#include <mutex>
 #include <thrust/system/cuda/execution_policy.h>
 #endif
 
@@ -53,6 +60,58 @@ inline void check_cuda(cudaError_t status, const char* what) {
     throw DeviceError(std::string(what) + ": " + cudaGetErrorName(status) + " (" +
                       cudaGetErrorString(status) + ")");
 }
+
+/// Device memory for the temporaries of reductions (their scratch space and
+/// result), kept for reuse: thrust otherwise pays a cudaMalloc and a
+/// device-wide synchronising cudaFree on every call, dozens of times a frame.
+/// One pool per process, shared by every stream and thread. Only algorithms
+/// whose result the host reads before they return may use it (a block goes
+/// back to the pool when the algorithm ends, and the next user may run on
+/// another stream). Blocks are never returned to CUDA: the pool holds the
+/// largest set of temporaries in use at once, a few KiB for reductions.
+class ReductionMemoryPool {
+ public:
+  static ReductionMemoryPool& instance() {
+    static ReductionMemoryPool* pool = new ReductionMemoryPool;  // never destroyed: CUDA may be gone first
+    return *pool;
+  }
+  char* allocate(std::size_t bytes) {
+    {
+      const std::lock_guard<std::mutex> lock(mutex_);
+      const auto it = free_.lower_bound(bytes);
+      if (it != free_.end() && it->first <= 2 * bytes + 4096) {
+        char* p = it->second;
+        used_[p] = it->first;
+        free_.erase(it);
+        return p;
+      }
+    }
+    void* p = nullptr;
+    check_cuda(cudaMalloc(&p, bytes), "ReductionMemoryPool: cudaMalloc");
+    const std::lock_guard<std::mutex> lock(mutex_);
+    used_[static_cast<char*>(p)] = bytes;
+    return static_cast<char*>(p);
+  }
+  void deallocate(char* p) {
+    const std::lock_guard<std::mutex> lock(mutex_);
+    const auto it = used_.find(p);
+    if (it == used_.end()) return;
+    free_.emplace(it->second, p);
+    used_.erase(it);
+  }
+
+ private:
+  std::mutex mutex_;
+  std::multimap<std::size_t, char*> free_;
+  std::map<char*, std::size_t> used_;
+};
+
+/// The allocator thrust takes for temporaries, drawing on the pool above.
+struct ReductionAllocator {
+  using value_type = char;
+  char* allocate(std::ptrdiff_t bytes) { return ReductionMemoryPool::instance().allocate(std::size_t(bytes)); }
+  void deallocate(char* p, std::size_t) { ReductionMemoryPool::instance().deallocate(p); }
+};
 }  // namespace detail
 
 /// The CUDA backend: work is queued on `stream` (the legacy default stream
@@ -67,9 +126,59 @@ struct Cuda {
   cudaStream_t stream = nullptr;
 
   auto policy() const { return thrust::cuda::par_nosync.on(stream); }
+  /// For reductions, whose result the host reads before they return: their
+  /// temporaries come from detail::ReductionMemoryPool.
+  auto reduction_policy() const {
+    static detail::ReductionAllocator allocator;
+    return thrust::cuda::par_nosync(allocator).on(stream);
+  }
   void synchronize() const { detail::check_cuda(cudaStreamSynchronize(stream), "Cuda::synchronize"); }
 };
 
+#endif
+
+/// Independent queues of work on a backend, for solves that may run at the
+/// same time from several host threads (the system's objects). On the CPU
+/// there are none (`concurrent` is false: work runs one solve after another,
+/// each parallel inside); on CUDA, lane k is a stream of its own, created on
+/// first use and destroyed with the set.
+template <class B>
+class ConcurrentLanes {
+ public:
+  static constexpr bool concurrent = false;
+  B lane(std::size_t, const B& base) { return base; }
+};
+
+#if EMFUSION_HAS_CUDA
+template <>
+class ConcurrentLanes<Cuda> {
+ public:
+  static constexpr bool concurrent = true;
+  ConcurrentLanes() = default;
+  ConcurrentLanes(const ConcurrentLanes&) = delete;
+  ConcurrentLanes& operator=(const ConcurrentLanes&) = delete;
+  ConcurrentLanes(ConcurrentLanes&& o) noexcept : streams_(std::move(o.streams_)) { o.streams_.clear(); }
+  ConcurrentLanes& operator=(ConcurrentLanes&& o) noexcept {
+    std::swap(streams_, o.streams_);
+    return *this;
+  }
+  ~ConcurrentLanes() {
+    for (cudaStream_t s : streams_) cudaStreamDestroy(s);  // errors at teardown have nowhere to go
+  }
+  /// Lane k: a blocking stream, so it also orders itself after the legacy
+  /// default stream's work.
+  Cuda lane(std::size_t k, const Cuda&) {
+    while (streams_.size() <= k) {
+      cudaStream_t s = nullptr;
+      detail::check_cuda(cudaStreamCreate(&s), "ConcurrentLanes: cudaStreamCreate");
+      streams_.push_back(s);
+    }
+    return Cuda{streams_[k]};
+  }
+
+ private:
+  std::vector<cudaStream_t> streams_;
+};
 #endif
 
 /// What the library needs from a backend.

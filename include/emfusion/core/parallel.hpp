@@ -17,6 +17,16 @@
 
 namespace emfusion {
 
+/// The policy for a reduction on `backend`: its reduction_policy() where it
+/// has one (pooled temporaries on CUDA), else its policy().
+template <Backend B>
+auto reduction_policy(const B& backend) {
+  if constexpr (requires { backend.reduction_policy(); })
+    return backend.reduction_policy();
+  else
+    return backend.policy();
+}
+
 /// Calls f(i) for i in [0, n) on the backend (asynchronously on a device).
 template <Backend B, class Index, class F>
 void for_each_index(const B& backend, Index n, F f) {
@@ -29,7 +39,7 @@ void for_each_index(const B& backend, Index n, F f) {
 template <Backend B, class Index, class T, class F, class Op>
 T transform_reduce_index(const B& backend, Index n, F f, T init, Op op) {
   if (n <= 0) return init;
-  return thrust::transform_reduce(backend.policy(), thrust::counting_iterator<Index>(0),
+  return thrust::transform_reduce(reduction_policy(backend), thrust::counting_iterator<Index>(0),
                                   thrust::counting_iterator<Index>(n), f, init, op);
 }
 
@@ -80,7 +90,7 @@ template <Backend B, class Index, class T, class F>
 T accumulate_index(const B& backend, Index n, F f, const T& zero) {
   if (n <= 0) return zero;
   if constexpr (B::is_device) {
-    return thrust::transform_reduce(backend.policy(), thrust::counting_iterator<Index>(0),
+    return thrust::transform_reduce(reduction_policy(backend), thrust::counting_iterator<Index>(0),
                                     thrust::counting_iterator<Index>(n), detail::AccumulateOne<T, F>{f, zero}, zero,
                                     detail::AddInPlace{});
   } else {

@@ -20,12 +20,17 @@
 #include <chrono>
 #include <cmath>
 #include <cstdint>
+#include <future>
 #include <memory>
 #include <optional>
 #include <span>
 #include <string>
 #include <utility>
 #include <vector>
+
+#if defined(__GLIBC__)
+#include <malloc.h>
+#endif
 
 #include "emfusion/core/camera.hpp"
 #include "emfusion/core/image.hpp"
@@ -243,6 +248,17 @@ struct ForegroundWeight {
   }
 };
 
+/// Hands free heap memory back to the system. glibc keeps freed blocks
+/// below its dynamic mmap threshold (which rises to the size of the largest
+/// block freed, so object volumes land there) on its heap: without this a
+/// CPU system's resident memory stays at the peak of the object volumes it
+/// ever held (docs/system.md, "Memory bound"). A no-op with other C libraries.
+inline void release_free_host_memory() {
+#if defined(__GLIBC__)
+  malloc_trim(0);
+#endif
+}
+
 /// Keeps, per pixel, the nearest object surface of all objects raycast so far.
 template <class S>
 struct NearestObject {
@@ -383,12 +399,24 @@ class System {
     result.times.foreground = clock.lap();
 
     delete_objects(result, det != nullptr, int(fresh.size()), !starts_map);
+    // Deleted and resized (detector frames) object volumes are freed memory
+    // the C library may keep; on the CPU that is resident memory.
+    if constexpr (!B::is_device)
+      if (!result.deleted.empty() || det) detail::system::release_free_host_memory();
     finish(result, timestamp, clock);
     return result;
   }
 
   const PinholeCamera<S>& camera() const { return camera_; }
   const SystemParams<S>& params() const { return params_; }
+  /// Bytes of the models: the background volume and every live object's
+  /// volume and foreground counts (on the backend's memory). The bound of
+  /// docs/system.md, "Memory bound", is on this.
+  std::size_t memory_bytes() const {
+    std::size_t bytes = background_.memory_bytes();
+    for (const auto& o : objects_) bytes += o->memory_bytes();
+    return bytes;
+  }
   int frame_count() const { return frame_; }
   const SE3<S>& camera_pose() const { return T_world_camera_; }  ///< T_world_camera of the last frame
   const Trajectory& camera_trajectory() const { return camera_trajectory_; }
@@ -551,23 +579,40 @@ class System {
       e_ms += clock.lap();
       SdfAlignmentParams<S> obj_align = align;
       obj_align.confidence_normalizer = params_.object_integration.max_weight;
-      for (std::size_t k = 0; k < objects_.size(); ++k) {
-        Object& o = *objects_[k];
+      // Each object's solve is independent of the others': on CUDA they run
+      // from host threads on streams of their own, so that their small
+      // kernels and the host's LM steps overlap.
+      const std::size_t n = objects_.size();
+      object_caches_.resize(n);
+      std::vector<SolveReport> reports(n);
+      std::vector<SE3<S>> T_volume_camera(n);
+      const auto solve = [&](std::size_t k, const B& run_on) {
+        const Object& o = *objects_[k];
         const HuberNorm<S> norm{params_.huber_voxels * o.volume().voxel_size()};
-        SolveReport report;
         // The object starts where it was; the solver finds how it moved
         // relative to the camera.
-        const SE3<S> T_volume_camera =
-            align_in_volume(o.volume(), points_, association_weights(int(k) + 1),
-                            o.volume().pose().inverse() * T_world_camera_, norm, obj_align, params_.lm, &report,
-                            &solve_cache_);
-        const SE3<S> T_world_object = T_world_camera_ * T_volume_camera.inverse() * o.T_object_volume().inverse();
+        T_volume_camera[k] = align_in_volume(o.volume(), points_, association_weights(int(k) + 1),
+                                             o.volume().pose().inverse() * T_world_camera_, norm, obj_align,
+                                             params_.lm, &reports[k], &object_caches_[k], &run_on);
+      };
+      if (ConcurrentLanes<B>::concurrent && n > 1) {
+        std::vector<B> lanes;
+        for (std::size_t k = 0; k < n; ++k) lanes.push_back(lanes_.lane(k, backend_));
+        std::vector<std::future<void>> running;
+        for (std::size_t k = 0; k < n; ++k) running.push_back(std::async(std::launch::async, solve, k, lanes[k]));
+        for (auto& r : running) r.get();  // rethrows a solve's exception here
+      } else {
+        for (std::size_t k = 0; k < n; ++k) solve(k, backend_);
+      }
+      for (std::size_t k = 0; k < n; ++k) {
+        Object& o = *objects_[k];
+        const SE3<S> T_world_object = T_world_camera_ * T_volume_camera[k].inverse() * o.T_object_volume().inverse();
         ObjectTrack& t = object_tracks_[k];
         t.step = detail::system::step_between(o.pose(), T_world_object);
-        t.outcome = detail::system::tracking_outcome(report, double(params_.min_object_terms), T_world_object, t.step,
-                                                     params_.max_object_motion);
+        t.outcome = detail::system::tracking_outcome(reports[k], double(params_.min_object_terms), T_world_object,
+                                                     t.step, params_.max_object_motion);
         if (t.outcome == TrackingOutcome::tracked) o.set_pose(T_world_object);
-        result.objects.push_back(report);
+        result.objects.push_back(reports[k]);
       }
       result.times.track_objects = clock.lap();
     }
@@ -753,11 +798,12 @@ class System {
   void integrate_models(const Image<S, B>& depth, const std::vector<NewObjectWeights>& fresh, bool first) {
     const std::size_t old_objects = objects_.size() - fresh.size();
     integrate(background_, depth, camera_, T_world_camera_, first ? nullptr : association_weights(0),
-              params_.background_integration);
+              params_.background_integration, &integration_workspace_);
     for (std::size_t k = 0; k < objects_.size(); ++k) {
       const Image<S, B>* weights =
           k < old_objects ? association_weights(int(k) + 1) : &fresh[k - old_objects].weights;
-      integrate(objects_[k]->volume(), depth, camera_, T_world_camera_, weights, params_.object_integration);
+      integrate(objects_[k]->volume(), depth, camera_, T_world_camera_, weights, params_.object_integration,
+                &integration_workspace_);
     }
   }
 
@@ -900,7 +946,10 @@ class System {
   Image<Vec3<S>, B> points_;
   Associations<S, B> associations_;
   RaycastResult<S, B> background_render_;
-  LinearizationCache<S, B> solve_cache_;  ///< per-term buffers, shared by the solves one after another
+  LinearizationCache<S, B> solve_cache_;                 ///< the camera solve's per-term buffers
+  std::vector<LinearizationCache<S, B>> object_caches_;  ///< one per object solve (they may run at once)
+  ConcurrentLanes<B> lanes_;                             ///< streams of the concurrent object solves
+  IntegrationWorkspace<S, B> integration_workspace_;
   Image<S, B> object_depth_;
   Image<int, B> segmentation_;
 };

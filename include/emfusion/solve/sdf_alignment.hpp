@@ -116,15 +116,19 @@ SdfAlignmentTerms<S, Store> make_sdf_alignment(const TsdfVolume<S, B, Store>& vo
 /// returns the solved T_volume_camera. Use it when the volume's own pose is
 /// what is estimated (a moving object): it avoids a round trip through the
 /// volume's world pose. `cache` (optional) keeps the per-term buffers of
-/// the solve between calls, saving their allocation (LinearizationCache).
+/// the solve between calls, saving their allocation (LinearizationCache);
+/// `run_on` (optional) is the backend the solve's work runs on instead of
+/// the volume's, e.g. a CUDA stream of its own so that solves from several
+/// host threads overlap (ConcurrentLanes). Each solve needs its own cache.
 template <class S, Backend B, class Store, class Norm>
   requires RobustNorm<Norm, S>
 SE3<S> align_in_volume(const TsdfVolume<S, B, Store>& volume, const Image<Vec3<S>, B>& points,
                        const Image<S, B>* association, const SE3<S>& T_volume_camera, const Norm& norm,
                        const SdfAlignmentParams<S>& params = {}, const LevenbergMarquardtParams& lm = {},
-                       SolveReport* report = nullptr, LinearizationCache<S, B>* cache = nullptr) {
+                       SolveReport* report = nullptr, LinearizationCache<S, B>* cache = nullptr,
+                       const B* run_on = nullptr) {
   const auto terms = make_sdf_alignment(volume, points, association, params);
-  const B& backend = volume.backend();
+  const B& backend = run_on ? *run_on : volume.backend();
   LinearizationCache<S, B> local;
   LinearizationCache<S, B>& values = cache ? *cache : local;
   values.reset();

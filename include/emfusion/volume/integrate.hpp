@@ -267,14 +267,22 @@ S max_valid_depth(const Image<S, B>& depth) {
                                 detail::Larger<S>{});
 }
 
+/// Per-pixel images integrate() derives from the depth (incidence, the
+/// silhouette guard's nearest depths); pass one to reuse their memory across
+/// calls instead of allocating them every time.
+template <class S, Backend B>
+struct IntegrationWorkspace {
+  Image<S, B> incidence, rows, near_depth;
+};
+
 /// Fuses `depth` (metres, 0 = invalid), seen by `camera` at `T_world_camera`,
 /// into `volume`. `weights`, if non-empty, gives q(u) per pixel and must have
 /// the depth image's size. Runs on the volume's backend; the images must live
-/// there too.
+/// there too. `workspace` (optional) keeps the derived images' memory.
 template <class S, Backend B, class Store>
 void integrate(TsdfVolume<S, B, Store>& volume, const Image<S, B>& depth, const PinholeCamera<S>& camera,
                const SE3<S>& T_world_camera, const Image<S, B>* weights = nullptr,
-               const IntegrationParams<S>& params = {}) {
+               const IntegrationParams<S>& params = {}, IntegrationWorkspace<S, B>* workspace = nullptr) {
   constexpr const char* where = "integrate";
   camera.validate(where);
   detail::require_image(depth.view(), camera.width, camera.height, where, "depth image");
@@ -284,32 +292,44 @@ void integrate(TsdfVolume<S, B, Store>& volume, const Image<S, B>& depth, const 
   detail::require(params.max_weight > S(0), where,
                   "max_weight must be positive, got " + std::to_string(double(params.max_weight)));
   const B& backend = volume.backend();
-  Image<S, B> incidence, near_depth;
+  IntegrationWorkspace<S, B> local;
+  IntegrationWorkspace<S, B>& ws = workspace ? *workspace : local;
+  const auto sized = [&](Image<S, B>& image) -> Image<S, B>& {
+    if (!image.same_size(depth.width(), depth.height())) image = Image<S, B>(depth.width(), depth.height(), S(0), backend);
+    return image;
+  };
+  ImageView<const S> incidence, near_depth;
   if (params.point_to_plane || params.weight_by_incidence) {
-    incidence = Image<S, B>(depth.width(), depth.height(), S(0), backend);
+    Image<S, B>& image = sized(ws.incidence);
     for_each_index(backend, depth.size(),
-                   detail::IncidencePixel<S>{depth.view(), camera, params.min_incidence_weight, incidence.view()});
+                   detail::IncidencePixel<S>{depth.view(), camera, params.min_incidence_weight, image.view()});
+    incidence = std::as_const(image).view();
   }
   if (params.silhouette_guard > S(0)) {
-    Image<S, B> rows(depth.width(), depth.height(), S(0), backend);
-    near_depth = Image<S, B>(depth.width(), depth.height(), S(0), backend);
+    Image<S, B>& rows = sized(ws.rows);
+    Image<S, B>& near = sized(ws.near_depth);
     const S lateral = params.silhouette_guard * volume.voxel_size() * std::max(camera.fx, camera.fy);
     for_each_index(backend, depth.size(),
                    detail::NearestDepthPass<S>{depth.view(), depth.view(), rows.view(), lateral, 1, 0});
     for_each_index(backend, depth.size(),
-                   detail::NearestDepthPass<S>{depth.view(), std::as_const(rows).view(), near_depth.view(), lateral,
-                                               0, 1});
+                   detail::NearestDepthPass<S>{depth.view(), std::as_const(rows).view(), near.view(), lateral, 0, 1});
+    near_depth = std::as_const(near).view();
   }
   detail::IntegrateColumn<S, Store> f{volume.view(),
                                       depth.view(),
                                       weights ? weights->view() : ImageView<const S>{},
-                                      std::as_const(incidence).view(),
-                                      std::as_const(near_depth).view(),
+                                      incidence,
+                                      near_depth,
                                       camera,
                                       T_world_camera.inverse() * volume.pose(),
                                       params,
-                                      max_valid_depth(depth) + volume.truncation()};
-  if (!(f.far > volume.truncation())) return;  // no measurement at all
+                                      std::numeric_limits<S>::infinity()};
+  // The far plane pays on the CPU, where voxels are visited one by one; on a
+  // device the reduction's round trip costs more than the voxels it skips.
+  if constexpr (!B::is_device) {
+    f.far = max_valid_depth(depth) + volume.truncation();
+    if (!(f.far > volume.truncation())) return;  // no measurement at all
+  }
   for_each_index(volume.backend(), volume.dims()[0] * volume.dims()[1], f);
 }
 
