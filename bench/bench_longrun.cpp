@@ -25,6 +25,7 @@
 #include "emfusion/slam/system.hpp"
 #include "memory.hpp"
 #include "report.hpp"
+#include "synthetic.hpp"
 #include "support/args.hpp"
 #include "support/backend.hpp"
 
@@ -47,15 +48,10 @@ struct Sample {
 
 template <class B>
 int run(const Options& o) {
-  sim::DynamicSceneParams p;
-  p.frames = o.frames;
-  p.width = o.width;
-  p.height = o.width * 3 / 4;
-  p.moving_objects = o.objects;
-  const sim::SyntheticSequence seq(p);
-  sim::SimulatedDetectorParams dp;
-  dp.min_area = std::max(1, int(dp.min_area * double(p.width) * p.height / (640.0 * 480.0)));
-  sim::SimulatedDetector<float> detector(seq.scene(), dp);
+  bench::SyntheticRoom room = bench::synthetic_room(o.frames, o.width, o.objects);
+  const sim::DynamicSceneParams& p = room.params;
+  const sim::SyntheticSequence& seq = room.sequence;
+  sim::SimulatedDetector<float>& detector = room.detector;
 
   SystemParams<S> params;
   params.background_voxels = o.voxels;

@@ -32,6 +32,7 @@
 #include "support/args.hpp"
 #include "memory.hpp"
 #include "report.hpp"
+#include "synthetic.hpp"
 #include "support/backend.hpp"
 
 using namespace emfusion;
@@ -74,15 +75,9 @@ Workload load(const Options& o) {
     for (auto& [name, traj] : seq.ground_truth_objects()) w.object_truth[name] = traj;
     return w;
   }
-  sim::DynamicSceneParams p;
-  p.frames = o.frames;
-  p.width = o.width;
-  p.height = o.width * 3 / 4;
-  p.moving_objects = o.objects;
-  const sim::SyntheticSequence seq(p);
-  sim::SimulatedDetectorParams dp;
-  dp.min_area = std::max(1, int(dp.min_area * double(p.width) * p.height / (640.0 * 480.0)));
-  sim::SimulatedDetector<float> detector(seq.scene(), dp);
+  bench::SyntheticRoom room = bench::synthetic_room(o.frames, o.width, o.objects);
+  const sim::SyntheticSequence& seq = room.sequence;
+  sim::SimulatedDetector<float>& detector = room.detector;
   w.camera = seq.camera();
   for (std::size_t i = 0; i < seq.size(); ++i) {
     w.timestamps.push_back(seq.timestamp(i));

@@ -25,7 +25,8 @@ jobs="${EMFUSION_JOBS:-$(nproc)}"
 # few cores that are shared with other work.
 export OMP_WAIT_POLICY=passive
 
-say() { echo "==> [test.sh] $*"; }
+started=$SECONDS
+say() { printf '==> [test.sh %3dm%02ds] %s\n' $(((SECONDS - started) / 60)) $(((SECONDS - started) % 60)) "$*"; }
 
 say "installing dependencies (scripts/setup-debian.sh)"
 bash scripts/setup-debian.sh

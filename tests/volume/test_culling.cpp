@@ -1,6 +1,6 @@
 // Work the volume kernels skip must be work that changes nothing: the
 // frustum and far-plane range of an integrated voxel column, the silhouette
-// guard's minimum filter, and raycasting only where asked.
+// guard's minimum filter, and rays cast only where asked, up to a depth.
 #include <cmath>
 #include <limits>
 #include <random>
@@ -98,8 +98,8 @@ TEMPLATE_TEST_CASE("The silhouette guard's minimum filter matches a direct searc
   }
 }
 
-TEMPLATE_LIST_TEST_CASE("Raycasting only where asked equals the full raycast there", "[volume]",
-                        emfusion::test::AllConfigs) {
+TEMPLATE_LIST_TEST_CASE("Rays cast only where asked and up to a depth find the full raycast's crossings before it",
+                        "[volume]", emfusion::test::AllConfigs) {
   using S = typename TestType::Scalar;
   using B = typename TestType::Backend;
   const auto camera = test::small_camera<S>();
@@ -108,33 +108,47 @@ TEMPLATE_LIST_TEST_CASE("Raycasting only where asked equals the full raycast the
   TsdfVolume<S, B> volume(test::cube_around<S>(Vec3<S>::zero(), 64, S(0.01)));
   test::fuse_views(volume, scene, camera, test::orbit_poses<S>(Vec3<S>::zero(), S(1.2), 12));
   const SE3<S> pose = sim::look_at<S>(vec3(S(0.8), S(-0.7), S(0.4)), Vec3<S>::zero(), vec3(S(0), S(0), S(1)));
-
-  std::vector<S> mask(std::size_t(camera.width) * camera.height, S(0));
-  for (int v = 0; v < camera.height; ++v)
-    for (int x = 0; x < camera.width / 2; ++x) mask[std::size_t(v) * camera.width + x] = S(1);
-  const auto where = Image<S, Host>::from_host(camera.width, camera.height, mask).template to<B>();
   RaycastResult<S, B> full, part;
   raycast(volume, camera, pose, full);
-  raycast(volume, camera, pose, part, {}, static_cast<const ForegroundCounts<S, B>*>(nullptr), &where);
+  const auto full_depth = full.depth.to_host();
+  const auto full_hit = full.hit.to_host();
 
-  const auto full_depth = full.depth.to_host(), part_depth = part.depth.to_host();
-  const auto full_hit = full.hit.to_host(), part_hit = part.hit.to_host();
-  std::size_t hits_inside = 0, hits_outside = 0;
-  for (std::size_t i = 0; i < mask.size(); ++i) {
-    if (mask[i] > S(0)) {
-      REQUIRE(part_hit[i] == full_hit[i]);
-      REQUIRE(part_depth[i] == full_depth[i]);
-      hits_inside += full_hit[i];
-    } else {
-      REQUIRE(part_hit[i] == 0);
-      REQUIRE(part_depth[i] == S(0));
-      hits_outside += full_hit[i];
+  // Left half: rays end 2 cm beyond the full raycast's depth on even rows
+  // and 2 cm before it on odd rows (1.2 m where it missed); right half: none.
+  std::vector<S> end(full_depth.size(), S(0));
+  for (int v = 0; v < camera.height; ++v)
+    for (int x = 0; x < camera.width / 2; ++x) {
+      const std::size_t i = std::size_t(v) * camera.width + x;
+      end[i] = full_hit[i] ? full_depth[i] + (v % 2 ? S(-0.02) : S(0.02)) : S(1.2);
     }
-  }
-  CHECK(hits_inside > 1000);
-  CHECK(hits_outside > 1000);
+  const auto ray_end = Image<S, Host>::from_host(camera.width, camera.height, end).template to<B>();
+  raycast(volume, camera, pose, part, {}, static_cast<const ForegroundCounts<S, B>*>(nullptr), &ray_end);
+
+  const auto part_depth = part.depth.to_host();
+  const auto part_hit = part.hit.to_host();
+  std::size_t found = 0, cut = 0, outside = 0;
+  for (int v = 0; v < camera.height; ++v)
+    for (int x = 0; x < camera.width; ++x) {
+      const std::size_t i = std::size_t(v) * camera.width + x;
+      INFO("pixel (" << x << ", " << v << ")");
+      if (x >= camera.width / 2 || !full_hit[i]) {
+        REQUIRE(part_hit[i] == 0);
+        REQUIRE(part_depth[i] == S(0));
+        outside += full_hit[i];
+      } else if (v % 2 == 0) {
+        REQUIRE(part_hit[i] == 1);
+        REQUIRE(part_depth[i] == full_depth[i]);
+        ++found;
+      } else {
+        REQUIRE(part_hit[i] == 0);
+        ++cut;
+      }
+    }
+  CHECK(found > 500);
+  CHECK(cut > 500);
+  CHECK(outside > 1000);
 
   const auto wrong = Image<S, Host>(camera.width + 1, camera.height, S(1)).template to<B>();
   CHECK_THROWS_WITH(raycast(volume, camera, pose, part, {}, static_cast<const ForegroundCounts<S, B>*>(nullptr), &wrong),
-                    EMF_CONTAINS("only_where image is 201x150"));
+                    EMF_CONTAINS("ray_end image is 201x150"));
 }

@@ -275,6 +275,19 @@ struct NearestObject {
   }
 };
 
+/// Where the background's rays end: `margin` in front of the object drawn
+/// at the pixel (nothing drawn or too near: 0, no ray).
+template <class S>
+struct BackgroundRayEnd {
+  ImageView<const S> object_depth;
+  ImageView<S> end;
+  S margin;
+  EMF_HD void operator()(int i) const {
+    const S d = object_depth[i] - margin;
+    end[i] = object_depth[i] > S(0) && d > S(0) ? d : S(0);
+  }
+};
+
 /// The background wins a pixel where no object was drawn, or where the
 /// object lies more than `margin` behind the background surface (rendered
 /// only where objects were drawn). Pixels without an object are background
@@ -632,7 +645,8 @@ class System {
       object_depth_ = Image<S, B>(w, h, S(0), backend_);
     }
     // Nearest object per pixel first; then the background, rendered only
-    // where an object was drawn (elsewhere nothing competes with it).
+    // where an object was drawn (elsewhere nothing competes with it) and
+    // only up to the depth where it would lose.
     object_depth_.fill(S(0));
     segmentation_.fill(-1);
     for (std::size_t k = 0; k < objects_.size(); ++k) {
@@ -643,9 +657,16 @@ class System {
                      detail::system::NearestObject<S>{std::as_const(o).rendering().depth.view(), object_depth_.view(),
                                    segmentation_.view(), int(k) + 1});
     }
-    if (!objects_.empty())
+    if (!objects_.empty()) {
+      // The background wins only in front of object depth - margin: its
+      // rays stop there.
+      if (!background_ray_end_.same_size(w, h)) background_ray_end_ = Image<S, B>(w, h, S(0), backend_);
+      for_each_index(backend_, w * h,
+                     detail::system::BackgroundRayEnd<S>{std::as_const(object_depth_).view(),
+                                                         background_ray_end_.view(), params_.occlusion_margin});
       raycast(background_, camera_, T_world_camera_, background_render_, rp,
-              static_cast<const ForegroundCounts<S, B>*>(nullptr), &std::as_const(object_depth_));
+              static_cast<const ForegroundCounts<S, B>*>(nullptr), &std::as_const(background_ray_end_));
+    }
     const ImageView<const S> bg =
         objects_.empty() ? ImageView<const S>{} : std::as_const(background_render_).depth.view();
     for_each_index(backend_, w * h,
@@ -951,6 +972,7 @@ class System {
   ConcurrentLanes<B> lanes_;                             ///< streams of the concurrent object solves
   IntegrationWorkspace<S, B> integration_workspace_;
   Image<S, B> object_depth_;
+  Image<S, B> background_ray_end_;
   Image<int, B> segmentation_;
 };
 

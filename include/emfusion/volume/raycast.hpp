@@ -85,7 +85,7 @@ struct RaycastPixel {
   ImageView<Vec3<S>> normals;
   ImageView<std::uint8_t> hit;
   ForegroundView<S, const float> foreground;  // empty: every crossing counts
-  ImageView<const S> only_where;              // empty: every pixel; else rays only where > 0
+  ImageView<const S> ray_end;                 // empty: every pixel; else rays only where > 0, ending there
 
   EMF_HD void miss(int i) const {
     const S nan = std::numeric_limits<S>::quiet_NaN();
@@ -96,7 +96,7 @@ struct RaycastPixel {
   }
 
   EMF_HD void operator()(int i) const {
-    if (!only_where.empty() && !(only_where[i] > S(0))) {
+    if (!ray_end.empty() && !(ray_end[i] > S(0))) {
       miss(i);
       return;
     }
@@ -106,7 +106,8 @@ struct RaycastPixel {
     const Vec3<S> dir = T_volume_camera.rotate(ray_cam);
     // Samples need the 8 voxel centres around them: stay half a voxel inside.
     const S half = S(0.5) * volume.voxel_size;
-    S t = params.min_depth / ray_cam.z(), t_end = params.max_depth / ray_cam.z();
+    const S end_depth = !ray_end.empty() && ray_end[i] < params.max_depth ? ray_end[i] : params.max_depth;
+    S t = params.min_depth / ray_cam.z(), t_end = end_depth / ray_cam.z();
     if (!clip_ray_to_box(origin, dir, Vec3<S>::constant(half), volume.extent() - Vec3<S>::constant(half), t, t_end)) {
       miss(i);
       return;
@@ -180,12 +181,13 @@ struct RaycastPixel {
 /// Renders `volume` into `camera` at `T_world_camera`; writes into `out`
 /// (allocated on the volume's backend as needed). With `foreground` (an
 /// object's counts, same grid), only surfaces with p_fg > min_foreground.
-/// With `only_where` (an image of the camera's size), rays are cast only
-/// where it is positive; every other pixel is a miss.
+/// With `ray_end` (an image of the camera's size), rays are cast only where
+/// it is positive, and end at that depth: a pixel's first crossing before it
+/// or a miss (a question such as "is the surface in front of this depth?").
 template <class S, Backend B, class Store>
 void raycast(const TsdfVolume<S, B, Store>& volume, const PinholeCamera<S>& camera, const SE3<S>& T_world_camera,
              RaycastResult<S, B>& out, const RaycastParams<S>& params = {},
-             const ForegroundCounts<S, B>* foreground = nullptr, const Image<S, B>* only_where = nullptr) {
+             const ForegroundCounts<S, B>* foreground = nullptr, const Image<S, B>* ray_end = nullptr) {
   camera.validate("raycast");
   detail::require(params.min_depth >= S(0) && params.max_depth > params.min_depth, "raycast",
                   "need 0 <= min_depth < max_depth");
@@ -193,9 +195,9 @@ void raycast(const TsdfVolume<S, B, Store>& volume, const PinholeCamera<S>& came
   detail::RaycastPixel<S, Store> f{volume.view(),       camera,          volume.pose().inverse() * T_world_camera,
                                    params,              out.depth.view(), out.vertices.view(),
                                    out.normals.view(),  out.hit.view(),   {}, {}};
-  if (only_where) {
-    detail::require_image(only_where->view(), camera.width, camera.height, "raycast", "only_where image");
-    f.only_where = only_where->view();
+  if (ray_end) {
+    detail::require_image(ray_end->view(), camera.width, camera.height, "raycast", "ray_end image");
+    f.ray_end = ray_end->view();
   }
   if (foreground) {
     detail::require(foreground->dims()[0] == volume.dims()[0] && foreground->dims()[1] == volume.dims()[1] &&
