@@ -67,13 +67,21 @@ inline void check_cuda(cudaError_t status, const char* what) {
 /// One pool per process, shared by every stream and thread. Only algorithms
 /// whose result the host reads before they return may use it (a block goes
 /// back to the pool when the algorithm ends, and the next user may run on
-/// another stream). Blocks are never returned to CUDA: the pool holds the
-/// largest set of temporaries in use at once, a few KiB for reductions.
+/// another stream). The pool holds the largest set of temporaries in use at
+/// once (a few hundred KiB) and frees it at exit.
 class ReductionMemoryPool {
  public:
   static ReductionMemoryPool& instance() {
-    static ReductionMemoryPool* pool = new ReductionMemoryPool;  // never destroyed: CUDA may be gone first
-    return *pool;
+    // Constructed after the CUDA runtime started (on the first reduction), so
+    // destroyed before the runtime's own teardown.
+    static ReductionMemoryPool pool;
+    return pool;
+  }
+  ReductionMemoryPool() = default;
+  ReductionMemoryPool(const ReductionMemoryPool&) = delete;
+  ReductionMemoryPool& operator=(const ReductionMemoryPool&) = delete;
+  ~ReductionMemoryPool() {
+    for (auto& entry : free_) cudaFree(entry.second);  // errors at exit have nowhere to go
   }
   char* allocate(std::size_t bytes) {
     {
