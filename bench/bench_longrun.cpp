@@ -95,15 +95,14 @@ int run(const Options& o) {
     device_growth = samples.back().device_mib - first->device_mib;
     std::printf("growth from frame %d to %d: host %+.1f MiB, device %+.1f MiB, models %+.1f MiB\n", first->frame,
                 samples.back().frame, host_growth, device_growth, samples.back().model_mib - first->model_mib);
-    // What the process holds beyond the models (on the CPU the models are
-    // host memory, on a device device memory).
-    double low = 1e300, high = -1e300;
-    for (auto s = first; s != samples.end(); ++s) {
-      const double beyond = (B::is_device ? s->device_mib : s->host_mib) - (B::is_device ? 0.0 : s->model_mib);
-      low = std::min(low, beyond), high = std::max(high, beyond);
-    }
-    if (!B::is_device)
+    // On the CPU the models are host memory: what the process holds beyond
+    // them should stay flat.
+    if (!B::is_device) {
+      double low = 1e300, high = -1e300;
+      for (auto s = first; s != samples.end(); ++s)
+        low = std::min(low, s->host_mib - s->model_mib), high = std::max(high, s->host_mib - s->model_mib);
       std::printf("host memory beyond the models from frame %d on: %.1f to %.1f MiB\n", first->frame, low, high);
+    }
   } else {
     std::printf("no sample at or after the warm-up (frame %d): growth not measured\n", o.warmup);
   }

@@ -26,11 +26,10 @@
 #if EMFUSION_HAS_CUDA
 #include <cuda_runtime.h>
 #include <thrust/device_vector.h>
+#include <thrust/system/cuda/execution_policy.h>
 
-#include <cstddef>
 #include <map>
 #include <mutex>
-#include <thrust/system/cuda/execution_policy.h>
 #endif
 
 namespace emfusion {

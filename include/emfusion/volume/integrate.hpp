@@ -246,9 +246,6 @@ struct NearestDepthPass {
   }
 };
 
-}  // namespace detail
-
-namespace detail {
 template <class S>
 struct ValidDepthOrZero {
   ImageView<const S> depth;
