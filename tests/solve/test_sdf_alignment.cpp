@@ -187,3 +187,49 @@ TEMPLATE_LIST_TEST_CASE("Alignment to a single plane does not diverge", "[solve]
   CHECK(pose_error(found, down).translation < 0.1);
   CHECK(report.converged());
 }
+
+TEMPLATE_LIST_TEST_CASE("positive_box bounds the positive pixels; boxed terms change nothing", "[solve]",
+                        emfusion::test::AllConfigs) {
+  using S = typename TestType::Scalar;
+  using B = typename TestType::Backend;
+  const auto camera = test::room_camera<S>();
+  const int w = camera.width, h = camera.height;
+  // An association that is positive in a rectangle and at one stray pixel.
+  std::vector<S> q(std::size_t(w) * h, S(0));
+  for (int v = 21; v < 57; ++v)
+    for (int u = 33; u < 71; ++u) q[std::size_t(v) * w + u] = S(0.25) + S((u + v) % 7) / S(10);
+  q[std::size_t(60) * w + 80] = S(1);
+  const Image<S, B> association = Image<S, B>::from_host(w, h, q);
+  const PixelBox box = positive_box(association.backend(), association);
+  CHECK(box.x0 == 33);
+  CHECK(box.y0 == 21);
+  CHECK(box.x1 == 81);
+  CHECK(box.y1 == 61);
+  CHECK(positive_box(association.backend(), Image<S, B>(w, h, S(0))).empty());
+  CHECK(positive_box(association.backend(), Image<S, B>(w, h, S(-1))).empty());
+
+  // The terms of the box are those of the whole image with q > 0: the same
+  // normal equations up to the order of the sums, at every stride.
+  const auto volume = test::fused_room<S, B>();
+  const SE3<S> truth = SE3<S>::exp(Vec6<S>{{S(0.02), S(-0.01), S(0.03), S(0.01), S(-0.02), S(0.01)}});
+  const auto points = test::room_points<S, B>(truth);
+  const SE3<S> at = SE3<S>::exp(Vec6<S>{{S(0.01), S(0.01), S(-0.01), S(0.01), S(0), S(0.01)}}) * truth;
+  const SE3<S> T_volume_camera = volume.pose().inverse() * at;
+  const HuberNorm<S> huber{S(2) * volume.voxel_size()};
+  for (int stride : {1, 2, 3}) {
+    SdfAlignmentParams<S> params;
+    params.pixel_stride = stride;
+    auto whole = make_sdf_alignment(volume, points, &association, params);
+    auto boxed = whole;
+    boxed.box = box;
+    INFO("stride " << stride);
+    CHECK(boxed.term_count() < whole.term_count() / 5);
+    const NormalEquations6 a = linearize(volume.backend(), whole, huber, T_volume_camera);
+    const NormalEquations6 b = linearize(volume.backend(), boxed, huber, T_volume_camera);
+    REQUIRE(a.terms > 100);
+    CHECK(b.terms == a.terms);
+    CHECK(b.cost == Approx(a.cost).epsilon(1e-9));
+    for (int i = 0; i < 6; ++i) CHECK(b.g[i] == Approx(a.g[i]).epsilon(1e-9).margin(1e-12));
+    for (int i = 0; i < 21; ++i) CHECK(b.H[i] == Approx(a.H[i]).epsilon(1e-9).margin(1e-12));
+  }
+}

@@ -11,6 +11,7 @@
 #include <cmath>
 
 #include "emfusion/core/image.hpp"
+#include "emfusion/core/parallel.hpp"
 #include "emfusion/core/se3.hpp"
 #include "emfusion/robust/norms.hpp"
 #include "emfusion/solve/normal_equations.hpp"
@@ -47,8 +48,46 @@ EMF_HD inline S kinect_depth_sigma(S z) {
   return S(0.0012) + S(0.0019) * d * d;
 }
 
+/// A rectangle of pixels, [x0, x1) x [y0, y1); empty when x1 <= x0 or y1 <= y0.
+struct PixelBox {
+  int x0 = 0, y0 = 0, x1 = 0, y1 = 0;
+  EMF_HD bool empty() const { return x1 <= x0 || y1 <= y0; }
+};
+
+namespace detail {
+template <class S>
+struct PositivePixelBox {  // the one-pixel box of pixel i where q > 0, else an empty one
+  ImageView<const S> q;
+  EMF_HD PixelBox operator()(int i) const {
+    if (!(q[i] > S(0))) return PixelBox{};
+    const int u = i % q.width, v = i / q.width;
+    return PixelBox{u, v, u + 1, v + 1};
+  }
+};
+struct UniteBoxes {
+  EMF_HD PixelBox operator()(const PixelBox& a, const PixelBox& b) const {
+    if (a.empty()) return b;
+    if (b.empty()) return a;
+    return PixelBox{a.x0 < b.x0 ? a.x0 : b.x0, a.y0 < b.y0 ? a.y0 : b.y0, a.x1 > b.x1 ? a.x1 : b.x1,
+                    a.y1 > b.y1 ? a.y1 : b.y1};
+  }
+};
+}  // namespace detail
+
+/// The smallest box holding every pixel where `weights` is positive (empty
+/// when there is none), computed on `backend`. An object's association is
+/// zero outside the few pixels it covers: its terms need only this box.
+template <class S, Backend B>
+PixelBox positive_box(const B& backend, const Image<S, B>& weights) {
+  const detail::PositivePixelBox<S> f{weights.view()};
+  return transform_reduce_index(backend, weights.size(), f, PixelBox{}, detail::UniteBoxes{});
+}
+
 /// The per-pixel terms of SDF alignment (a PoseTerms problem over
 /// T_volume_camera). Holds views: valid while the volume and images live.
+/// The terms are the pixels of `box` (the whole image when it is empty) on
+/// the grid of every `stride`-th pixel of the image, so a box changes which
+/// pixels take part but not how they are sampled.
 template <class S, class Store = S>
 struct SdfAlignmentTerms {
   TsdfView<S, const Store> volume;
@@ -58,13 +97,25 @@ struct SdfAlignmentTerms {
   int stride = 1;
   bool central_gradient = false;
   S noise_reference_sigma = S(0);   ///< sigma at the reference depth; 0 = no depth weighting
+  PixelBox box{};                   ///< pixels that may take part; empty = the whole image
 
+  /// The box on the stride grid: first column and row, and how many of each.
+  EMF_HD void grid(int& u0, int& v0, int& columns, int& rows) const {
+    const PixelBox b = box.empty() ? PixelBox{0, 0, points.width, points.height} : box;
+    u0 = (b.x0 + stride - 1) / stride * stride;
+    v0 = (b.y0 + stride - 1) / stride * stride;
+    columns = b.x1 > u0 ? (b.x1 - u0 + stride - 1) / stride : 0;
+    rows = b.y1 > v0 ? (b.y1 - v0 + stride - 1) / stride : 0;
+  }
   EMF_HD int term_count() const {
-    return ((points.width + stride - 1) / stride) * ((points.height + stride - 1) / stride);
+    int u0, v0, columns, rows;
+    grid(u0, v0, columns, rows);
+    return columns * rows;
   }
   EMF_HD bool term(int i, const SE3<S>& T_volume_camera, S& r, Vec6<S>& J, S& w) const {
-    const int columns = (points.width + stride - 1) / stride;
-    const int u = (i % columns) * stride, v = (i / columns) * stride;
+    int u0, v0, columns, rows;
+    grid(u0, v0, columns, rows);
+    const int u = u0 + (i % columns) * stride, v = v0 + (i / columns) * stride;
     const int pixel = v * points.width + u;
     const Vec3<S> p = points[pixel];
     if (!(std::isfinite(p.x()) && std::isfinite(p.y()) && std::isfinite(p.z()))) return false;
@@ -127,8 +178,13 @@ SE3<S> align_in_volume(const TsdfVolume<S, B, Store>& volume, const Image<Vec3<S
                        const SdfAlignmentParams<S>& params = {}, const LevenbergMarquardtParams& lm = {},
                        SolveReport* report = nullptr, LinearizationCache<S, B>* cache = nullptr,
                        const B* run_on = nullptr) {
-  const auto terms = make_sdf_alignment(volume, points, association, params);
+  auto terms = make_sdf_alignment(volume, points, association, params);
   const B& backend = run_on ? *run_on : volume.backend();
+  // Pixels without association add nothing: skip them in every iteration.
+  if (!terms.association.empty()) {
+    terms.box = positive_box(backend, *association);
+    if (terms.box.empty()) terms.box = PixelBox{0, 0, 1, 1};  // no term at all; one pixel, q = 0
+  }
   LinearizationCache<S, B> local;
   LinearizationCache<S, B>& values = cache ? *cache : local;
   values.reset();

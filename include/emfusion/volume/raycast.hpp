@@ -4,7 +4,10 @@
 //
 // March steps follow the reference implementation: the truncation distance
 // while the SDF is truncated, then one voxel, then half a voxel once |sdf|
-// falls below 0.8 truncation. A crossing is refined by regula falsi inside
+// falls below 0.8 truncation. "Truncated" allows for rounding: a voxel that
+// fused free space many times holds the truncation distance to within a few
+// ulps, often just below it, and an exact comparison marched the whole free
+// space voxel by voxel (ten times the steps). A crossing is refined by regula falsi inside
 // its bracket, so the surface is found to a small fraction of a voxel.
 //
 // Object volumes pass their foreground counts: a crossing counts only where
@@ -113,6 +116,7 @@ struct RaycastPixel {
       return;
     }
     const S trunc = volume.truncation, vs = volume.voxel_size;
+    const S truncated = trunc * S(0.999);  // above every rounding of trunc, even in half precision
     bool have_prev = false;
     S t_prev = t, f_prev = S(0);
     // Bounded: each step advances at least half a voxel.
@@ -137,7 +141,7 @@ struct RaycastPixel {
       if (have_prev && f_prev < S(0) && f > S(0) && foreground.empty()) break;
       have_prev = true;
       t_prev = t, f_prev = f;
-      t += f >= trunc ? trunc : (f >= S(0.8) * trunc ? vs : S(0.5) * vs);
+      t += f >= truncated ? trunc : (f >= S(0.8) * trunc ? vs : S(0.5) * vs);
     }
     miss(i);
   }
