@@ -388,6 +388,8 @@ void run(const RunOptions& o) {
     if (o.pictures) write_pictures(pictures, i, in.colour(i), system, r);
     if (o.verbose) {
       for (const int id : r.created) std::fprintf(stderr, "%sframe %zu: created object %d\n", tty ? "\n" : "", i, id);
+      for (const int id : r.reidentified)
+        std::fprintf(stderr, "%sframe %zu: re-identified lost object %d\n", tty ? "\n" : "", i, id);
       for (const int id : r.deleted)
         for (const ObjectRecord& rec : system.object_records())
           if (rec.id == id)

@@ -100,6 +100,23 @@ struct SystemParams {
   std::vector<std::string> static_classes = default_static_classes();
   bool ignore_person = false;         ///< keep person objects for association only
 
+  // Objects that leave the view (an extension of the paper, docs/system.md,
+  // "Lost objects"). An object deleted as not visible is kept as lost, with
+  // neither tracking nor mapping, for lost_object_frames frames (0: deleted
+  // for good, the paper's rule), at most max_lost_objects of them. A
+  // detection of its class that matches no live object is aligned to each
+  // lost object; the one on whose surface at least reidentify_min_inliers of
+  // the detection's points lie returns, with its id and model, instead of a
+  // new object.
+  int lost_object_frames = 900;
+  int max_lost_objects = 8;
+  double reidentify_min_inliers = 0.6;
+  /// An object created or re-identified on a detector frame is not deleted
+  /// as not visible until it has been visible once or the detector runs
+  /// again: one that enters the view across the image border would
+  /// otherwise go on the next frame.
+  bool young_object_grace = true;
+
   // Rendering (sec. 3.5).
   S min_foreground = S(0.5);     ///< object voxels render where p_fg exceeds this
   S occlusion_margin = S(0.05);  ///< an object pixel this far behind the background loses
@@ -149,6 +166,10 @@ struct SystemParams {
     detail::require(match_iou >= 0 && match_iou < 1, w, "match_iou must be in [0, 1)");
     detail::require(min_mask_pixels >= 1, w, "min_mask_pixels must be at least 1");
     detail::require(visibility_border >= 0, w, "visibility_border must not be negative");
+    detail::require(lost_object_frames >= 0 && max_lost_objects >= 0, w,
+                    "lost_object_frames and max_lost_objects must not be negative");
+    detail::require(reidentify_min_inliers > 0 && reidentify_min_inliers <= 1, w,
+                    "reidentify_min_inliers must be in (0, 1]");
     detail::require(background_integration.max_weight > S(0) && object_integration.max_weight > S(0), w,
                     "max_weight must be positive");
   }

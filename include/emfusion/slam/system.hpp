@@ -7,10 +7,13 @@
 //   3. track the camera against the background, re-associate, track every
 //      object; associate once more at the final poses (the mapping weights);
 //   4. raycast every model (objects only where p_fg > 0.5, nearest wins);
-//   5. on detector frames: match, existence, new objects, resizing;
+//   5. on detector frames: match, existence, lost objects re-identified,
+//      new objects, resizing;
 //   6. integrate the frame into every model, weighted by its association;
 //      update foreground counts from the matched detections;
-//   7. delete objects that are unlikely, invisible or weakly associated.
+//   7. delete objects that are unlikely, invisible or weakly associated
+//      (invisible ones are kept as lost, for re-identification: an
+//      extension of the paper, docs/system.md "Lost objects").
 //
 // Generic over the scalar and the backend; everything per pixel or voxel
 // runs on the backend, detection handling (every 30th frame) on the host.
@@ -160,6 +163,9 @@ struct FrameResult {
   int invalid_detections = 0;           ///< instances ignored: label outside 1..65535 or repeated, score not finite
   int detections_over_cap = 0;          ///< unmatched detections not considered: max_objects objects were live
   std::vector<int> created, deleted;    ///< object ids
+  /// Lost objects (deleted as not visible) that a detection brought back,
+  /// with their ids; they were in an earlier frame's `deleted`.
+  std::vector<int> reidentified;
   std::vector<ObjectStatus> object_status;  ///< objects that existed before this frame, in objects() order
   int live_objects = 0;
   StageTimes times;
@@ -344,6 +350,16 @@ struct AddObjectPixels {
   EMF_HD ObjectPixels operator()(const ObjectPixels& a, const ObjectPixels& b) const { return a + b; }
 };
 
+/// A "norm" whose cost counts residuals at least `delta` (weight 1): with
+/// unit term weights, linearize() then returns the terms (NormalEquations6::terms)
+/// and how many of them are off the surface (cost).
+template <class S>
+struct OffSurfaceCount {
+  S delta;
+  EMF_HD S cost(S r) const { return std::fabs(r) < delta ? S(0) : S(1); }
+  EMF_HD S weight(S) const { return S(1); }
+};
+
 }  // namespace detail::system
 
 template <class S, Backend B = Host>
@@ -390,7 +406,8 @@ class System {
       // Integrating a frame at a pose that is not its own would corrupt every
       // model; the detections and the deletion rules need that pose too.
       report_objects(result);
-      finish(result, timestamp, clock);
+      record(timestamp);
+      finish(result, clock);
       return result;
     }
     // Detection handling reads the segmentation on the host (detector
@@ -411,12 +428,15 @@ class System {
     if (det) update_foreground_counts(depth_, *det, seg, matched_object_of_detection, fresh);
     result.times.foreground = clock.lap();
 
+    // Objects deleted now were tracked in this frame: its pose is the last
+    // of their trajectories.
+    record(timestamp);
     delete_objects(result, det != nullptr, int(fresh.size()), !starts_map);
     // Deleted and resized (detector frames) object volumes are freed memory
     // the C library may keep; on the CPU that is resident memory.
     if constexpr (!B::is_device)
       if (!result.deleted.empty() || det) detail::system::release_free_host_memory();
-    finish(result, timestamp, clock);
+    finish(result, clock);
     return result;
   }
 
@@ -428,6 +448,7 @@ class System {
   std::size_t memory_bytes() const {
     std::size_t bytes = background_.memory_bytes();
     for (const auto& o : objects_) bytes += o->memory_bytes();
+    for (const auto& l : lost_) bytes += l.object->memory_bytes();
     return bytes;
   }
   int frame_count() const { return frame_; }
@@ -715,6 +736,10 @@ class System {
     }
     for (std::size_t d = 0; d < det.instances.size(); ++d) {
       if (match.object_of[d] >= 0) continue;
+      if (std::optional<NewObjectWeights> w = reidentify(det, int(d), seg, points, result)) {
+        fresh.push_back(std::move(*w));
+        continue;
+      }
       if (std::optional<NewObjectWeights> w = create_object(det, int(d), seg, points, result)) fresh.push_back(std::move(*w));
     }
   }
@@ -781,21 +806,7 @@ class System {
     auto obj = std::make_unique<Object>(id, inst.class_name, T_world_center, params_.object_voxels,
                                         side / S(params_.object_voxels), params_.truncation_voxels, backend_);
     obj->add_class_score(inst.class_name, inst.score);
-    NewObjectWeights w;
-    w.detection = d;
-    // Outside the mask a pixel gets the association the E-step would give a
-    // model that does not explain it beside one that does, so that the
-    // border of the first view is observed as on later frames.
-    const S outside = unexplained_association();
-    std::vector<S> weights(points.size(), S(0));
-    std::vector<std::uint8_t> mask(points.size(), 0);
-    for (std::size_t i = 0; i < points.size(); ++i) {
-      if (seg[i] > 0) continue;  // another object's pixel
-      if (labels[i] == inst.label) weights[i] = S(1), mask[i] = 1;
-      else weights[i] = outside;
-    }
-    w.weights = Image<S, Host>::from_host(camera_.width, camera_.height, weights).template to<B>(backend_);
-    w.mask = Image<std::uint8_t, Host>::from_host(camera_.width, camera_.height, mask).template to<B>(backend_);
+    NewObjectWeights w = first_view_weights(det, d, seg);
     ObjectRecord rec;
     rec.id = id;
     rec.class_name = inst.class_name;
@@ -804,6 +815,98 @@ class System {
     objects_.push_back(std::move(obj));
     result.created.push_back(id);
     return w;
+  }
+
+  /// The mapping weights of an object's first frame (new or re-identified):
+  /// 1 on the detection's pixels, 0 on other objects' pixels.
+  NewObjectWeights first_view_weights(const Detections& det, int d, const std::vector<int>& seg) const {
+    const std::uint16_t* labels = det.labels.view().data;
+    const int label = det.instances[std::size_t(d)].label;
+    NewObjectWeights w;
+    w.detection = d;
+    // Outside the mask a pixel gets the association the E-step would give a
+    // model that does not explain it beside one that does, so that the
+    // border of the first view is observed as on later frames.
+    const S outside = unexplained_association();
+    std::vector<S> weights(seg.size(), S(0));
+    std::vector<std::uint8_t> mask(seg.size(), 0);
+    for (std::size_t i = 0; i < seg.size(); ++i) {
+      if (seg[i] > 0) continue;  // another object's pixel
+      if (labels[i] == label) weights[i] = S(1), mask[i] = 1;
+      else weights[i] = outside;
+    }
+    w.weights = Image<S, Host>::from_host(camera_.width, camera_.height, weights).template to<B>(backend_);
+    w.mask = Image<std::uint8_t, Host>::from_host(camera_.width, camera_.height, mask).template to<B>(backend_);
+    return w;
+  }
+
+  // ---- Lost objects --------------------------------------------------------
+
+  /// Tries to bring back a lost object of the detection's class: each is
+  /// aligned to the detection's points from its orientation when lost, its
+  /// box centre placed at the points' centroid pushed back along the ray by
+  /// 0, 1/16, 1/8 and 3/16 of the box side (the visible surface lies in
+  /// front of the object's centre; an object fills about half its box); the
+  /// best solve with at least reidentify_min_inliers of the points within a
+  /// Huber delta of the surface wins. Returns its first-view weights.
+  /// (docs/system.md, "Lost objects".)
+  std::optional<NewObjectWeights> reidentify(const Detections& det, int d, const std::vector<int>& seg,
+                                             const std::vector<Vec3<S>>& points, FrameResult& result) {
+    if (lost_.empty() || int(objects_.size()) >= params_.max_objects) return std::nullopt;
+    const Instance& inst = det.instances[std::size_t(d)];
+    if (is_listed_class(inst.class_name, params_.static_classes)) return std::nullopt;
+    const std::uint16_t* labels = det.labels.view().data;
+    const std::vector<Vec3<S>> p = largest_depth_group(detection_points(points, labels, inst.label, &seg),
+                                                       params_.object_depth_gap);
+    if (int(p.size()) < min_mask_pixels()) return std::nullopt;
+    Vec3<S> centroid = Vec3<S>::zero();
+    for (const Vec3<S>& x : p) centroid = centroid + x;
+    centroid = centroid / S(p.size());
+    const Vec3<S> ray = normalized(centroid);
+    // The detection's pixels (without other objects' ones) with weight 1.
+    std::vector<S> in_mask(seg.size(), S(0));
+    for (std::size_t i = 0; i < seg.size(); ++i) in_mask[i] = labels[i] == inst.label && !(seg[i] > 0) ? S(1) : S(0);
+    const auto mask = Image<S, Host>::from_host(camera_.width, camera_.height, in_mask).template to<B>(backend_);
+
+    SdfAlignmentParams<S> align = alignment_params();
+    align.confidence_normalizer = params_.object_integration.max_weight;
+    SdfAlignmentParams<S> count = align;
+    count.use_map_confidence = false;
+    int best = -1;
+    double best_inliers = 0;
+    SE3<S> best_T;
+    for (std::size_t k = 0; k < lost_.size(); ++k) {
+      const Object& o = *lost_[k].object;
+      if (o.class_name() != inst.class_name) continue;
+      const auto& volume = o.volume();
+      const S delta = params_.huber_voxels * volume.voxel_size();
+      const Vec3<S> centre = S(0.5) * volume.view().extent();
+      const auto R = (volume.pose().inverse() * T_world_camera_).rotation();
+      const S step = volume.view().extent().x() / S(16);
+      for (int h = 0; h < 4; ++h) {
+        const Vec3<S> at = centroid + (S(h) * step) * ray;
+        const SE3<S> start(R, centre - R * at);
+        SolveReport report;
+        const SE3<S> T = align_in_volume(volume, points_, &mask, start, HuberNorm<S>{delta}, align, params_.lm, &report);
+        if (!report.converged() || report.terms < double(params_.min_object_terms)) continue;
+        const NormalEquations6 n = linearize(backend_, make_sdf_alignment(volume, points_, &mask, count),
+                                             detail::system::OffSurfaceCount<S>{delta}, T);
+        const double inliers = (n.terms - n.cost) / double(p.size());
+        if (inliers > best_inliers) best = int(k), best_inliers = inliers, best_T = T;
+      }
+    }
+    if (best < 0 || best_inliers < params_.reidentify_min_inliers) return std::nullopt;
+    std::unique_ptr<Object> obj = std::move(lost_[std::size_t(best)].object);
+    lost_.erase(lost_.begin() + best);
+    obj->set_pose(T_world_camera_ * best_T.inverse() * obj->T_object_volume().inverse());
+    obj->add_class_score(inst.class_name, inst.score);
+    obj->count_detected();
+    ObjectRecord& rec = record_of(obj->id());
+    rec.deleted = false;
+    rec.reason = DeletionReason::none;
+    result.reidentified.push_back(obj->id());
+    objects_.push_back(std::move(obj));
+    return first_view_weights(det, d, seg);
   }
 
   /// Eq. 5 for a pixel that one model explains perfectly (sdf 0, p_fg 1)
@@ -883,8 +986,7 @@ class System {
     for (int k = 0; k < int(objects_.size()); ++k) result.object_status.push_back(object_status(k, false));
   }
 
-  void finish(FrameResult& result, double timestamp, const Clock& clock) {
-    record(timestamp);
+  void finish(FrameResult& result, const Clock& clock) {
     result.live_objects = int(objects_.size());
     result.times.total = clock.total();
     ++frame_;
@@ -894,6 +996,9 @@ class System {
   /// every object that existed before it.
   void delete_objects(FrameResult& result, bool detector_frame, int created, bool tracked) {
     const int old_objects = int(objects_.size()) - created;
+    // Grace lasts until the object is first seen or the detector runs again.
+    if (detector_frame) young_.clear();
+    const auto young = [&](int id) { return std::find(young_.begin(), young_.end(), id) != young_.end(); };
     std::vector<DeletionReason> why(objects_.size(), DeletionReason::none);
     const bool associated = params_.use_association && tracked;
     for (int k = 0; k < old_objects; ++k) {
@@ -901,8 +1006,9 @@ class System {
       ObjectStatus status = object_status(k, associated);
       if (detector_frame && o.existence_probability() < params_.min_existence)
         why[std::size_t(k)] = DeletionReason::existence;
-      else if (!is_person(o) && status.visible_pixels < min_mask_pixels())
+      else if (!is_person(o) && status.visible_pixels < min_mask_pixels() && !young(o.id()))
         why[std::size_t(k)] = DeletionReason::not_visible;
+      if (status.visible_pixels >= min_mask_pixels()) std::erase(young_, o.id());
       else if (status.mean_association < params_.min_association)
         why[std::size_t(k)] = DeletionReason::weak_association;
       status.deleted = why[std::size_t(k)];
@@ -918,8 +1024,17 @@ class System {
       rec.deleted = true;
       rec.reason = why[k];
       result.deleted.push_back(objects_[k]->id());
+      if (why[k] == DeletionReason::not_visible && params_.lost_object_frames > 0 && params_.max_lost_objects > 0)
+        lost_.push_back(LostObject{std::move(objects_[k]), frame_});
     }
     objects_ = std::move(keep);
+    // Lost objects are forgotten when too old, the oldest first beyond the cap.
+    std::erase_if(lost_, [&](const LostObject& l) { return frame_ - l.lost_at > params_.lost_object_frames; });
+    while (int(lost_.size()) > params_.max_lost_objects) lost_.erase(lost_.begin());
+    if (detector_frame && params_.young_object_grace) {
+      young_ = result.created;
+      young_.insert(young_.end(), result.reidentified.begin(), result.reidentified.end());
+    }
   }
 
   /// Object k's pixel counts (ObjectPixels), reduced on the backend.
@@ -954,6 +1069,12 @@ class System {
   B backend_;
   TsdfVolume<S, B> background_;
   std::vector<std::unique_ptr<Object>> objects_;
+  struct LostObject {
+    std::unique_ptr<Object> object;
+    int lost_at = 0;  ///< the frame it was deleted as not visible
+  };
+  std::vector<LostObject> lost_;  ///< oldest first
+  std::vector<int> young_;        ///< ids created or re-identified on the last detector frame
   std::vector<ObjectRecord> records_;
   int next_id_ = 1;
   int frame_ = 0;
