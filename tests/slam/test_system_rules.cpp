@@ -72,10 +72,11 @@ struct FirstFrame {
   BoxScene<S> scene;
   Image<int, Host> labels;
   Image<S, B> depth = scene.template depth<B>(SE3<S>::identity(), &labels);
-  System<S, B> system{scene.camera, small_params<S>()};
+  System<S, B> system;
   FrameResult result;
-  explicit FirstFrame(const std::string& class_name, int scale = 1)
-      : scene(vec3(S(0), S(0), S(1.2)), scale) {
+  explicit FirstFrame(const std::string& class_name, int scale = 1,
+                      const SystemParams<S>& params = small_params<S>())
+      : scene(vec3(S(0), S(0), S(1.2)), scale), system(scene.camera, params) {
     const Detections det = detections_of(labels, 1, class_name, 0.0);
     result = system.process(depth, 0.0, &det);
   }
@@ -351,16 +352,13 @@ TEMPLATE_LIST_TEST_CASE("An object that left the view is re-identified when dete
                         emfusion::test::AllConfigs) {
   using S = typename TestType::Scalar;
   using B = typename TestType::Backend;
-  const BoxScene<S> scene;
   SystemParams<S> params = small_params<S>();
   // Near the border the weak-association rule may take the object first
   // (on some backends): this test is about the visibility rule.
   params.min_association = 0;
-  System<S, B> sys{scene.camera, params};
-  Image<int, Host> labels;
-  const Image<S, B> depth = scene.template depth<B>(SE3<S>::identity(), &labels);
-  const Detections det = detections_of(labels, 1, "cup", 0.0);
-  sys.process(depth, 0.0, &det);
+  FirstFrame<S, B> first("cup", 1, params);
+  System<S, B>& sys = first.system;
+  const BoxScene<S>& scene = first.scene;
   REQUIRE(sys.objects().size() == 1);
   const SE3<S> start = sys.objects()[0]->pose();  // the first camera is the world frame
   const int k = pan_until_deleted(sys, scene);
@@ -397,15 +395,12 @@ TEMPLATE_LIST_TEST_CASE("With lost_object_frames = 0 an object that left the vie
                         emfusion::test::AllConfigs) {
   using S = typename TestType::Scalar;
   using B = typename TestType::Backend;
-  BoxScene<S> scene;
   SystemParams<S> params = small_params<S>();
   params.lost_object_frames = 0;
   params.min_association = 0;  // as above: the visibility rule deletes it
-  System<S, B> sys{scene.camera, params};
-  Image<int, Host> labels;
-  const Image<S, B> depth = scene.template depth<B>(SE3<S>::identity(), &labels);
-  const Detections det = detections_of(labels, 1, "cup", 0.0);
-  sys.process(depth, 0.0, &det);
+  FirstFrame<S, B> first("cup", 1, params);
+  System<S, B>& sys = first.system;
+  const BoxScene<S>& scene = first.scene;
   REQUIRE(sys.objects().size() == 1);
   const int k = pan_until_deleted(sys, scene);
   REQUIRE(k > 0);

@@ -98,15 +98,24 @@ TEMPLATE_TEST_CASE("The silhouette guard's minimum filter matches a direct searc
   }
 }
 
+namespace {
+/// A sphere of 25 cm radius fused from 12 views around it into a 64^3 volume of 1 cm.
+template <class S>
+TsdfVolume<S, Host> fused_sphere() {
+  sim::Scene<S> scene;
+  scene.add(sim::make_sphere(Vec3<S>::zero(), S(0.25)));
+  TsdfVolume<S, Host> volume(test::cube_around<S>(Vec3<S>::zero(), 64, S(0.01)));
+  test::fuse_views(volume, scene, test::small_camera<S>(), test::orbit_poses<S>(Vec3<S>::zero(), S(1.2), 12));
+  return volume;
+}
+}  // namespace
+
 TEMPLATE_LIST_TEST_CASE("Rays cast only where asked and up to a depth find the full raycast's crossings before it",
                         "[volume]", emfusion::test::AllConfigs) {
   using S = typename TestType::Scalar;
   using B = typename TestType::Backend;
   const auto camera = test::small_camera<S>();
-  sim::Scene<S> scene;
-  scene.add(sim::make_sphere(Vec3<S>::zero(), S(0.25)));
-  TsdfVolume<S, B> volume(test::cube_around<S>(Vec3<S>::zero(), 64, S(0.01)));
-  test::fuse_views(volume, scene, camera, test::orbit_poses<S>(Vec3<S>::zero(), S(1.2), 12));
+  const TsdfVolume<S, B> volume = fused_sphere<S>().template to<B>();
   const SE3<S> pose = sim::look_at<S>(vec3(S(0.8), S(-0.7), S(0.4)), Vec3<S>::zero(), vec3(S(0), S(0), S(1)));
   RaycastResult<S, B> full, part;
   raycast(volume, camera, pose, full);
@@ -162,10 +171,7 @@ TEMPLATE_LIST_TEST_CASE("Free space stored a few ulps below the truncation rende
   // both (docs/benchmarks.md: a tenth of the steps) and must find the same
   // surfaces.
   const auto camera = test::small_camera<S>();
-  sim::Scene<S> scene;
-  scene.add(sim::make_sphere(Vec3<S>::zero(), S(0.25)));
-  TsdfVolume<S, Host> fused(test::cube_around<S>(Vec3<S>::zero(), 64, S(0.01)));
-  test::fuse_views(fused, scene, camera, test::orbit_poses<S>(Vec3<S>::zero(), S(1.2), 12));
+  const TsdfVolume<S, Host> fused = fused_sphere<S>();
   const S trunc = fused.truncation();
   const auto with_free_space = [&](S value) {
     TsdfVolume<S, Host> v = fused;
