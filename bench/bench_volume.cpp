@@ -2,14 +2,18 @@
 // large TSDF volume (default 512^3 voxels of 1 cm, the paper's background),
 // on every backend built or the one asked for.
 //
-//   bench_volume [--voxels N] [--repeats R] [--backend cpu|cuda|all] [--json FILE]
+//   bench_volume [--voxels N] [--repeats R] [--backend cpu|cuda|all] [--store float|half] [--json FILE]
 //
+// --store half keeps SDF and weight in 16 bits (core/half.hpp); the raycast
+// depth's error against the rendered depth (median and 90th percentile over
+// the pixels hit) shows what that costs in accuracy.
 // The scene is a synthetic room corner seen from the paper's background
 // placement (camera at the centre of one face of the volume). Each stage is
 // run `repeats` times after one warm-up; medians and 90th percentiles are
 // printed. Set OMP_WAIT_POLICY=passive on small machines (docs/benchmarks.md).
 #include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <fstream>
@@ -17,6 +21,7 @@
 #include <string>
 #include <vector>
 
+#include "emfusion/core/half.hpp"
 #include "emfusion/sim/primitives.hpp"
 #include "emfusion/sim/render.hpp"
 #include "emfusion/volume/integrate.hpp"
@@ -32,6 +37,7 @@ struct Options {
   int voxels = 512;
   int repeats = 10;
   std::string backend = "all";
+  std::string store = "float";
   std::string json;
 };
 
@@ -58,7 +64,7 @@ sim::Scene<S> room(const SE3<S>& T_world_camera) {
   return scene;
 }
 
-template <class B>
+template <class B, class Store>
 void run(const Options& o, std::FILE* json, bool& first) {
   const B backend{};
   const PinholeCamera<S> camera{};
@@ -67,7 +73,7 @@ void run(const Options& o, std::FILE* json, bool& first) {
   g.dims = Vec3i{{o.voxels, o.voxels, o.voxels}};
   g.voxel_size = 5.12f / S(o.voxels);
   g.T_world_volume = volume_pose_in_front_of(T_world_camera, 5.12f);
-  TsdfVolume<S, B> volume(g, backend);
+  TsdfVolume<S, B, Store> volume(g, backend);
 
   Image<S, B> depth;
   sim::render_depth(room(T_world_camera), camera, T_world_camera, depth, static_cast<Image<int, B>*>(nullptr), {},
@@ -88,13 +94,23 @@ void run(const Options& o, std::FILE* json, bool& first) {
     if (k > 0) integrate_ms.push_back(ti), raycast_ms.push_back(tr);  // k = 0 warms up
   }
   const Stats si = stats(integrate_ms), sr = stats(raycast_ms);
-  std::printf("%-5s %4d^3 (%6.0f MiB)  integrate median %8.2f ms  p90 %8.2f ms | raycast median %8.2f ms  p90 %8.2f ms\n",
-              B::name, o.voxels, volume.memory_bytes() / 1048576.0, si.median, si.p90, sr.median, sr.p90);
+  // The raycast's depth against the rendered one, where both exist.
+  const std::vector<S> truth = depth.to_host(), cast_depth = cast.depth.to_host();
+  std::vector<double> error_mm;
+  for (std::size_t i = 0; i < truth.size(); ++i)
+    if (truth[i] > S(0) && cast_depth[i] > S(0)) error_mm.push_back(1000.0 * std::fabs(double(cast_depth[i] - truth[i])));
+  const Stats se = error_mm.empty() ? Stats{} : stats(error_mm);
+  std::printf("%-5s %-5s %4d^3 (%6.0f MiB)  integrate median %8.2f ms  p90 %8.2f ms | raycast median %8.2f ms  p90 %8.2f ms"
+              " | depth error median %.3f mm  p90 %.3f mm\n",
+              B::name, o.store.c_str(), o.voxels, volume.memory_bytes() / 1048576.0, si.median, si.p90, sr.median,
+              sr.p90, se.median, se.p90);
   if (json) {
     std::fprintf(json,
-                 "%s  {\"backend\": \"%s\", \"voxels\": %d, \"repeats\": %d, \"integrate_ms\": {\"median\": %.3f, "
-                 "\"p90\": %.3f}, \"raycast_ms\": {\"median\": %.3f, \"p90\": %.3f}}",
-                 first ? "" : ",\n", B::name, o.voxels, o.repeats, si.median, si.p90, sr.median, sr.p90);
+                 "%s  {\"backend\": \"%s\", \"store\": \"%s\", \"voxels\": %d, \"repeats\": %d, \"integrate_ms\": "
+                 "{\"median\": %.3f, \"p90\": %.3f}, \"raycast_ms\": {\"median\": %.3f, \"p90\": %.3f}, "
+                 "\"depth_error_mm\": {\"median\": %.4f, \"p90\": %.4f}}",
+                 first ? "" : ",\n", B::name, o.store.c_str(), o.voxels, o.repeats, si.median, si.p90, sr.median, sr.p90,
+                 se.median, se.p90);
     first = false;
   }
 }
@@ -108,11 +124,13 @@ Options parse(int argc, char** argv) {
     if (a == "--voxels") o.voxels = examples::parse_positive_int(a, v, 2048);
     else if (a == "--repeats") o.repeats = examples::parse_positive_int(a, v);
     else if (a == "--backend") o.backend = v;
+    else if (a == "--store") o.store = v;
     else if (a == "--json") o.json = v;
     else throw std::invalid_argument("unknown option '" + a + "'");
   }
   if (o.backend != "cpu" && o.backend != "cuda" && o.backend != "all")
     throw std::invalid_argument("--backend must be cpu, cuda or all");
+  if (o.store != "float" && o.store != "half") throw std::invalid_argument("--store must be float or half");
   return o;
 }
 
@@ -125,9 +143,10 @@ int main(int argc, char** argv) {
     if (!o.json.empty() && !json) throw std::runtime_error("cannot write '" + o.json + "'");
     if (json) std::fprintf(json, "[\n");
     bool first = true;
-    if (o.backend != "cuda") run<Host>(o, json, first);
+    const bool half = o.store == "half";
+    if (o.backend != "cuda") half ? run<Host, Half>(o, json, first) : run<Host, S>(o, json, first);
 #if EMFUSION_HAS_CUDA
-    if (o.backend != "cpu") run<Cuda>(o, json, first);
+    if (o.backend != "cpu") half ? run<Cuda, Half>(o, json, first) : run<Cuda, S>(o, json, first);
 #else
     if (o.backend == "cuda") throw std::invalid_argument("this build has no CUDA backend");
 #endif

@@ -7,14 +7,17 @@
 //   track_camera <sequence-dir> <trajectory.txt> [--backend cpu|cuda]
 //                [--max-frames N] [--voxels N] [--voxel-size M] [--stride N] [--tau T]
 //                [--integration paper|refined] [--behind-band F] [--silhouette-guard G] [--bilateral-radius R] [--silhouette-guard VOXELS]
-//                [--central-gradient] [--depth-weight Z]
+//                [--central-gradient] [--depth-weight Z] [--store float|half]
 //                [--verbose]
+//
+// --store half keeps the volume's SDF and weight in 16 bits (core/half.hpp).
 #include <chrono>
 #include <cstdio>
 #include <stdexcept>
 #include <string>
 #include <vector>
 
+#include "emfusion/core/half.hpp"
 #include "emfusion/io/tum.hpp"
 #include "emfusion/preprocess/bilateral_filter.hpp"
 #include "emfusion/preprocess/vertex_map.hpp"
@@ -38,9 +41,10 @@ struct Options {
   double silhouette_guard = -1;
   int bilateral_radius = -1;  // -1: the filter's default
   double depth_weight = 0;    // SdfAlignmentParams::depth_noise_reference; 0 = off
+  std::string store = "float";
 };
 
-template <class B>
+template <class B, class Store>
 void track(const Options& o) {
   const B backend{};
   const TumSequence seq = TumSequence::open(o.sequence);
@@ -52,7 +56,7 @@ void track(const Options& o) {
   geometry.dims = Vec3i{{o.voxels, o.voxels, o.voxels}};
   geometry.voxel_size = S(o.voxel_size);
   geometry.T_world_volume = volume_pose_in_front_of(SE3<S>::identity(), S(o.voxels * o.voxel_size));
-  TsdfVolume<S, B> volume(geometry, backend);
+  TsdfVolume<S, B, Store> volume(geometry, backend);
   const HuberNorm<S> huber{S(2) * volume.voxel_size()};
   SdfAlignmentParams<S> align;
   align.pixel_stride = o.stride;
@@ -125,6 +129,10 @@ Options parse(int argc, char** argv) {
     else if (a == "--bilateral-radius") o.bilateral_radius = examples::parse_int(a, v, 0, 16);
     else if (a == "--silhouette-guard") o.silhouette_guard = examples::parse_positive_double(a, v);
     else if (a == "--depth-weight") o.depth_weight = examples::parse_positive_double(a, v);
+    else if (a == "--store") {
+      if (v != "float" && v != "half") throw std::invalid_argument("--store must be float or half");
+      o.store = v;
+    }
     else if (a == "--integration") {
       if (v != "paper" && v != "refined") throw std::invalid_argument("--integration must be paper or refined");
       o.integration = v;
@@ -133,7 +141,7 @@ Options parse(int argc, char** argv) {
   }
   if (positional.size() != 2)
     throw std::invalid_argument("usage: track_camera <sequence-dir> <trajectory.txt> [--backend cpu|cuda] "
-                                "[--max-frames N] [--voxels N] [--voxel-size M] [--stride N] [--tau T] [--integration paper|refined] [--behind-band F] [--silhouette-guard G] [--bilateral-radius R] [--depth-weight Z] [--central-gradient] [--verbose]");
+                                "[--max-frames N] [--voxels N] [--voxel-size M] [--stride N] [--tau T] [--integration paper|refined] [--behind-band F] [--silhouette-guard G] [--bilateral-radius R] [--depth-weight Z] [--central-gradient] [--store float|half] [--verbose]");
   o.sequence = positional[0], o.output = positional[1];
   return o;
 }
@@ -143,11 +151,12 @@ Options parse(int argc, char** argv) {
 int main(int argc, char** argv) {
   try {
     const Options o = parse(argc, argv);
+    const bool half = o.store == "half";
     if (o.backend == "cpu") {
-      track<Host>(o);
+      half ? track<Host, Half>(o) : track<Host, S>(o);
 #if EMFUSION_HAS_CUDA
     } else if (o.backend == "cuda") {
-      track<Cuda>(o);
+      half ? track<Cuda, Half>(o) : track<Cuda, S>(o);
 #endif
     } else {
       throw std::invalid_argument("--backend '" + o.backend + "' is not available in this build (cpu" +

@@ -46,8 +46,8 @@ VolumeGeometry<S> cube_around(const Vec3<S>& center, int n, S voxel) {
 
 /// Renders and integrates every pose; clean synthetic depth, so by default
 /// with the refined update (IntegrationParams::refined()).
-template <class S, class B>
-void fuse_views(TsdfVolume<S, B>& volume, const sim::Scene<S>& scene, const PinholeCamera<S>& camera,
+template <class S, class B, class Store>
+void fuse_views(TsdfVolume<S, B, Store>& volume, const sim::Scene<S>& scene, const PinholeCamera<S>& camera,
                 const std::vector<SE3<S>>& poses,
                 const IntegrationParams<S>& params = IntegrationParams<S>::refined()) {
   Image<S, B> depth;
