@@ -3,11 +3,13 @@
 #pragma once
 
 #include <cmath>
+#include <cstdint>
 #include <vector>
 
 #include "emfusion/sim/primitives.hpp"
 #include "emfusion/sim/render.hpp"
 #include "emfusion/volume/integrate.hpp"
+#include "emfusion/volume/raycast.hpp"
 #include "emfusion/volume/tsdf_volume.hpp"
 
 namespace emfusion::test {
@@ -56,6 +58,21 @@ void fuse_views(TsdfVolume<S, B, Store>& volume, const sim::Scene<S>& scene, con
                       volume.backend());
     integrate(volume, depth, camera, T_world_camera, static_cast<const Image<S, B>*>(nullptr), params);
   }
+}
+
+/// Depth and hit flags of two volumes raycast from the same pose, on the host.
+template <class S>
+struct TwoRenderings {
+  std::vector<S> depth_a, depth_b;
+  std::vector<std::uint8_t> hit_a, hit_b;
+};
+template <class S, class B, class StoreA, class StoreB>
+TwoRenderings<S> raycast_both(const TsdfVolume<S, B, StoreA>& a, const TsdfVolume<S, B, StoreB>& b,
+                              const PinholeCamera<S>& camera, const SE3<S>& T_world_camera) {
+  RaycastResult<S, B> ra, rb;
+  raycast(a, camera, T_world_camera, ra);
+  raycast(b, camera, T_world_camera, rb);
+  return {ra.depth.to_host(), rb.depth.to_host(), ra.hit.to_host(), rb.hit.to_host()};
 }
 
 }  // namespace emfusion::test

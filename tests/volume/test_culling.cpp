@@ -185,11 +185,7 @@ TEMPLATE_LIST_TEST_CASE("Free space stored a few ulps below the truncation rende
   const auto exact = with_free_space(trunc);
   const auto rounded = with_free_space(trunc * (S(1) - S(1e-5)));
   const SE3<S> pose = sim::look_at<S>(vec3(S(0.8), S(-0.7), S(0.4)), Vec3<S>::zero(), vec3(S(0), S(0), S(1)));
-  RaycastResult<S, B> a, b;
-  raycast(exact, camera, pose, a);
-  raycast(rounded, camera, pose, b);
-  const auto depth_a = a.depth.to_host(), depth_b = b.depth.to_host();
-  const auto hit_a = a.hit.to_host(), hit_b = b.hit.to_host();
+  const auto [depth_a, depth_b, hit_a, hit_b] = test::raycast_both(exact, rounded, camera, pose);
   std::size_t hits = 0;
   for (std::size_t i = 0; i < depth_a.size(); ++i) {
     INFO("pixel " << i);

@@ -31,11 +31,7 @@ TEMPLATE_LIST_TEST_CASE("Half storage fuses and renders the surfaces float stora
   test::fuse_views(half, scene, camera, poses);
 
   const SE3<S> pose = sim::look_at<S>(vec3(S(0.8), S(-0.7), S(0.4)), Vec3<S>::zero(), vec3(S(0), S(0), S(1)));
-  RaycastResult<S, B> a, b;
-  raycast(full, camera, pose, a);
-  raycast(half, camera, pose, b);
-  const auto depth_a = a.depth.to_host(), depth_b = b.depth.to_host();
-  const auto hit_a = a.hit.to_host(), hit_b = b.hit.to_host();
+  const auto [depth_a, depth_b, hit_a, hit_b] = test::raycast_both(full, half, camera, pose);
   std::size_t hits = 0, both = 0;
   double worst = 0;
   for (std::size_t i = 0; i < depth_a.size(); ++i) {
