@@ -100,8 +100,15 @@ struct SdfAlignmentTerms {
   PixelBox box{};                   ///< pixels that may take part; empty = the whole image
 
   /// The box on the stride grid: first column and row, and how many of each.
+  /// Every term calls it: stride 1 (the default) skips the divisions.
   EMF_HD void grid(int& u0, int& v0, int& columns, int& rows) const {
     const PixelBox b = box.empty() ? PixelBox{0, 0, points.width, points.height} : box;
+    if (stride == 1) {
+      u0 = b.x0, v0 = b.y0;
+      columns = b.x1 > u0 ? b.x1 - u0 : 0;
+      rows = b.y1 > v0 ? b.y1 - v0 : 0;
+      return;
+    }
     u0 = (b.x0 + stride - 1) / stride * stride;
     v0 = (b.y0 + stride - 1) / stride * stride;
     columns = b.x1 > u0 ? (b.x1 - u0 + stride - 1) / stride : 0;
