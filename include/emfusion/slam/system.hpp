@@ -817,24 +817,28 @@ class System {
     return w;
   }
 
-  /// The mapping weights of an object's first frame (new or re-identified):
-  /// 1 on the detection's pixels, 0 on other objects' pixels.
-  NewObjectWeights first_view_weights(const Detections& det, int d, const std::vector<int>& seg) const {
+  /// Per pixel, 1 where detection d's mask is and no other object is drawn
+  /// (`seg`): the pixels that are the detection's own.
+  std::vector<std::uint8_t> own_mask(const Detections& det, int d, const std::vector<int>& seg) const {
     const std::uint16_t* labels = det.labels.view().data;
     const int label = det.instances[std::size_t(d)].label;
+    std::vector<std::uint8_t> mask(seg.size(), 0);
+    for (std::size_t i = 0; i < seg.size(); ++i) mask[i] = labels[i] == label && !(seg[i] > 0);
+    return mask;
+  }
+
+  /// The mapping weights of an object's first frame (new or re-identified):
+  /// 1 on the detection's own pixels, 0 on other objects' pixels.
+  NewObjectWeights first_view_weights(const Detections& det, int d, const std::vector<int>& seg) const {
     NewObjectWeights w;
     w.detection = d;
     // Outside the mask a pixel gets the association the E-step would give a
     // model that does not explain it beside one that does, so that the
     // border of the first view is observed as on later frames.
     const S outside = unexplained_association();
+    const std::vector<std::uint8_t> mask = own_mask(det, d, seg);
     std::vector<S> weights(seg.size(), S(0));
-    std::vector<std::uint8_t> mask(seg.size(), 0);
-    for (std::size_t i = 0; i < seg.size(); ++i) {
-      if (seg[i] > 0) continue;  // another object's pixel
-      if (labels[i] == label) weights[i] = S(1), mask[i] = 1;
-      else weights[i] = outside;
-    }
+    for (std::size_t i = 0; i < seg.size(); ++i) weights[i] = mask[i] ? S(1) : seg[i] > 0 ? S(0) : outside;
     w.weights = Image<S, Host>::from_host(camera_.width, camera_.height, weights).template to<B>(backend_);
     w.mask = Image<std::uint8_t, Host>::from_host(camera_.width, camera_.height, mask).template to<B>(backend_);
     return w;
@@ -863,9 +867,9 @@ class System {
     for (const Vec3<S>& x : p) centroid = centroid + x;
     centroid = centroid / S(p.size());
     const Vec3<S> ray = normalized(centroid);
-    // The detection's pixels (without other objects' ones) with weight 1.
-    std::vector<S> in_mask(seg.size(), S(0));
-    for (std::size_t i = 0; i < seg.size(); ++i) in_mask[i] = labels[i] == inst.label && !(seg[i] > 0) ? S(1) : S(0);
+    // The detection's own pixels with weight 1.
+    const std::vector<std::uint8_t> own = own_mask(det, d, seg);
+    const std::vector<S> in_mask(own.begin(), own.end());
     const auto mask = Image<S, Host>::from_host(camera_.width, camera_.height, in_mask).template to<B>(backend_);
 
     SdfAlignmentParams<S> align = alignment_params();
