@@ -681,4 +681,15 @@ TEST_CASE("Hostile frames: the guards' parameters are validated", "[slam]") {
         std::string::npos);
   CHECK(error([](SystemParams<float>& p) { p.max_camera_motion.translation = NAN; }).find("motion bounds") !=
         std::string::npos);
+  // Lost objects.
+  CHECK(error([](SystemParams<float>& p) { p.lost_object_frames = 0; }).empty());  // the paper's rule
+  CHECK(error([](SystemParams<float>& p) { p.lost_object_frames = -1; }).find("lost_object_frames") !=
+        std::string::npos);
+  CHECK(error([](SystemParams<float>& p) { p.max_lost_objects = -2; }).find("max_lost_objects") != std::string::npos);
+  CHECK(error([](SystemParams<float>& p) { p.reidentify_min_inliers = 0; }).find("reidentify_min_inliers") !=
+        std::string::npos);
+  CHECK(error([](SystemParams<float>& p) { p.reidentify_min_inliers = 1.5; }).find("reidentify_min_inliers") !=
+        std::string::npos);
+  CHECK(error([](SystemParams<float>& p) { p.reidentify_min_inliers = NAN; }).find("reidentify_min_inliers") !=
+        std::string::npos);
 }
