@@ -25,6 +25,15 @@ inline int parse_positive_int(const std::string& flag, const std::string& value,
   return parse_int(flag, value, 1, max);
 }
 
+/// The value of `flag` as a finite number (any sign); throws naming the flag.
+inline double parse_double(const std::string& flag, const std::string& value) {
+  char* end = nullptr;
+  const double v = std::strtod(value.c_str(), &end);
+  if (value.empty() || *end != '\0' || !std::isfinite(v))
+    throw std::invalid_argument(flag + " expects a number, got '" + value + "'");
+  return v;
+}
+
 /// The value of `flag` as a finite positive number; throws naming the flag.
 inline double parse_positive_double(const std::string& flag, const std::string& value) {
   char* end = nullptr;

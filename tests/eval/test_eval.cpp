@@ -295,6 +295,30 @@ TEST_CASE("ATE matches a hand-computed example", "[eval]") {
   CHECK(pose_difference(r.T_gt_est, W.inverse()) < 1e-9);
 }
 
+TEST_CASE("ATE with a similarity alignment undoes a scale difference", "[eval]") {
+  // The hand-computed example's estimate, stretched 10 % about its centroid:
+  // the rigid fit leaves 0.1 |d_k| of error, the similarity fit none, at scale 1 / 1.1.
+  std::mt19937 rng(29);
+  const SE3d W = random_pose(rng);
+  const Vec3d c = vec3(1.0, 2.0, 3.0);
+  const std::vector<Vec3d> d = {vec3(1.0, 0.0, 0.0), vec3(-1.0, 0.0, 0.0), vec3(0.0, 2.0, 0.0), vec3(0.0, -2.0, 0.0),
+                                vec3(0.0, 0.0, 0.5)};
+  Trajectory est, gt;
+  for (std::size_t k = 0; k < d.size(); ++k) {
+    const double t = 1.0 + 0.5 * double(k);
+    gt.push_back({t, SE3d(SE3d().rotation(), c + d[k])});
+    est.push_back({t, W * SE3d(SE3d().rotation(), 1.1 * (c + d[k]))});
+  }
+  const AteResult rigid = absolute_trajectory_error(est, gt);
+  const AteResult similar = absolute_trajectory_error(est, gt, 0.02, Alignment::similarity);
+  CHECK(rigid.scale == 1.0);
+  CHECK(rigid.rmse > 0.05);
+  CHECK(similar.scale == Approx(1.0 / 1.1).epsilon(1e-12));
+  CHECK(similar.rmse < 1e-9);
+  for (std::size_t k = 0; k < d.size(); ++k)
+    CHECK(norm(similar.T_gt_est * (est[k].pose.translation() * similar.scale) - gt[k].pose.translation()) < 1e-9);
+}
+
 TEST_CASE("ATE rejects too few matches with a clear message", "[eval]") {
   const Trajectory gt = smooth_trajectory(1.0, 10.0);  // 11 poses at 0, 0.1, ..., 1
   Trajectory est = {gt[0], gt[5], {7.0, SE3d()}};      // only two near a ground-truth time

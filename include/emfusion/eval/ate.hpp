@@ -3,6 +3,9 @@
 // positions to the ground-truth positions with the best rigid transform (no
 // scale), and report statistics of the remaining translation errors
 // (shared FORMATS.md section 6, "Camera ATE"). Rotations do not enter ATE.
+// Alignment::similarity also fits a scale: a diagnostic (how much of the
+// error is a scale difference between estimate and ground truth), not the
+// benchmark's number.
 #pragma once
 
 #include <algorithm>
@@ -19,8 +22,12 @@
 
 namespace emfusion::eval {
 
-/// Statistics of the translation errors |T_gt_est * p_est(t) - p_gt(t)| over
-/// the matched poses, in metres.
+/// How the estimated positions are fitted to the ground truth before the
+/// errors are taken: rigidly (FORMATS.md's ATE) or with a scale as well.
+enum class Alignment { rigid, similarity };
+
+/// Statistics of the translation errors |T_gt_est * (scale * p_est(t)) - p_gt(t)|
+/// over the matched poses, in metres (scale is 1 for the rigid alignment).
 struct AteResult {
   double rmse;           ///< sqrt(mean of squared errors): the number the TUM benchmark and the papers report
   double mean;           ///< mean error
@@ -28,13 +35,35 @@ struct AteResult {
   double max;            ///< largest error
   std::size_t matched;   ///< number of matched poses the statistics are over
   SE3<double> T_gt_est;  ///< the fitted alignment: maps the estimate's world frame into the ground truth's
+  double scale = 1.0;    ///< the fitted scale (Alignment::similarity), applied before T_gt_est; 1 for rigid
 };
 
+namespace detail {
+
+/// The scale s minimising sum |R (s a_i) + t - b_i|^2 for the rotation R of
+/// the rigid fit (Umeyama: the optimal rotation does not depend on the scale):
+/// s = sum (b_i - cb) . R (a_i - ca) / sum |a_i - ca|^2; 1 when the a_i
+/// coincide, 0 when the b_i do (a ground truth at rest is best matched by
+/// shrinking the estimate to a point).
+inline double similarity_scale(const std::vector<Vec3d>& a, const std::vector<Vec3d>& b, const SE3<double>& rigid) {
+  const Vec3d ca = centroid(a), cb = centroid(b);
+  double num = 0.0, den = 0.0;
+  for (std::size_t i = 0; i < a.size(); ++i) {
+    const Vec3d da = a[i] - ca;
+    num += dot(b[i] - cb, rigid.rotate(da));
+    den += dot(da, da);
+  }
+  return den > 0.0 ? num / den : 1.0;
+}
+
+}  // namespace detail
+
 /// ATE of positions that are already matched pair by pair (est[i] belongs
-/// with gt[i]): rigid fit (align_rigid), then the error statistics. Needs at
-/// least 3 pairs; throws std::invalid_argument otherwise or if the counts
-/// differ.
-inline AteResult ate_of_positions(const std::vector<Vec3d>& est, const std::vector<Vec3d>& gt) {
+/// with gt[i]): rigid fit (align_rigid), with Alignment::similarity also the
+/// best scale, then the error statistics. Needs at least 3 pairs; throws
+/// std::invalid_argument otherwise or if the counts differ.
+inline AteResult ate_of_positions(const std::vector<Vec3d>& est, const std::vector<Vec3d>& gt,
+                                  Alignment alignment = Alignment::rigid) {
   constexpr const char* where = "ate_of_positions";
   emfusion::detail::require(
       est.size() == gt.size(), where,
@@ -43,11 +72,17 @@ inline AteResult ate_of_positions(const std::vector<Vec3d>& est, const std::vect
                             "need at least 3 matched positions, got " + std::to_string(est.size()));
   AteResult result{};
   result.T_gt_est = align_rigid(est, gt);
+  if (alignment == Alignment::similarity) {
+    result.scale = detail::similarity_scale(est, gt, result.T_gt_est);
+    // With the rotation R fixed, the best translation maps the scaled centroid onto gt's.
+    const Vec3d ce = detail::centroid(est), cg = detail::centroid(gt);
+    result.T_gt_est = SE3<double>(result.T_gt_est.rotation(), cg - result.T_gt_est.rotate(ce * result.scale));
+  }
   result.matched = est.size();
   std::vector<double> errors(est.size());
   double sum = 0.0, sum_sq = 0.0, largest = 0.0;
   for (std::size_t i = 0; i < est.size(); ++i) {
-    const double e = norm(result.T_gt_est * est[i] - gt[i]);
+    const double e = norm(result.T_gt_est * (est[i] * result.scale) - gt[i]);
     errors[i] = e;
     sum += e;
     sum_sq += e * e;
@@ -66,7 +101,8 @@ inline AteResult ate_of_positions(const std::vector<Vec3d>& est, const std::vect
 /// Camera ATE as TUM's evaluate_ate: `associate(est, gt, max_difference)`,
 /// then ate_of_positions of the matched translations. Throws
 /// std::invalid_argument if fewer than 3 poses match.
-inline AteResult absolute_trajectory_error(const Trajectory& est, const Trajectory& gt, double max_difference = 0.02) {
+inline AteResult absolute_trajectory_error(const Trajectory& est, const Trajectory& gt, double max_difference = 0.02,
+                                           Alignment alignment = Alignment::rigid) {
   const std::vector<Match> matches = associate(est, gt, max_difference);
   emfusion::detail::require(matches.size() >= 3, "absolute_trajectory_error",
                             "only " + std::to_string(matches.size()) + " of " + std::to_string(est.size()) +
@@ -80,7 +116,7 @@ inline AteResult absolute_trajectory_error(const Trajectory& est, const Trajecto
     est_positions.push_back(est[m.est].pose.translation());
     gt_positions.push_back(gt[m.gt].pose.translation());
   }
-  return ate_of_positions(est_positions, gt_positions);
+  return ate_of_positions(est_positions, gt_positions, alignment);
 }
 
 }  // namespace emfusion::eval
