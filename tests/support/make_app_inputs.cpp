@@ -8,6 +8,10 @@
 //   cofusion/              colour/Color000{0,1,2}.png, depth/Depth000{0,1,2}.exr,
 //                          calibration.txt (the same camera)
 //   depth-folder-only/     an empty depth/ folder: neither TUM nor Co-Fusion
+//   tum/                   TUM layout: depth.txt, depth/<t>.png (value / 5000 m),
+//                          calibration.txt, groundtruth.txt (the camera at rest
+//                          at the origin), no colour
+//   tum-other-clock.txt    that trajectory 100 s later: no pose matches a frame
 //
 // The scene: a wall 1.2 m away with a box face 0.9 m away in the middle of
 // the image, the same in every frame (a camera at rest).
@@ -57,13 +61,15 @@ int main(int argc, char** argv) {
     fs::create_directories(dir / "cofusion" / "colour");
     fs::create_directories(dir / "cofusion" / "depth");
     fs::create_directories(dir / "depth-folder-only" / "depth");
+    fs::create_directories(dir / "tum" / "depth");
 
-    Image<std::uint16_t, Host> millimetres(width, height);
+    Image<std::uint16_t, Host> millimetres(width, height), fifths(width, height);
     Image<float, Host> metres(width, height);
     Image<std::uint8_t, Host> grey(width, height);
     for (int y = 0; y < height; ++y)
       for (int x = 0; x < width; ++x) {
         millimetres.view()(x, y) = std::uint16_t(depth_at(x, y) * 1000 + 0.5);
+        fifths.view()(x, y) = std::uint16_t(depth_at(x, y) * 5000 + 0.5);
         metres.view()(x, y) = float(depth_at(x, y));
         grey.view()(x, y) = std::uint8_t(depth_at(x, y) < 1 ? 200 : 80);
       }
@@ -84,6 +90,21 @@ int main(int argc, char** argv) {
       write_exr((dir / "cofusion" / "depth" / ("Depth" + number + ".exr")).string(), metres);
     }
     write_text(dir / "cofusion" / "calibration.txt", calibration);
+
+    std::string depth_list = "# timestamp filename\n", poses = "# timestamp tx ty tz qx qy qz qw\n", later = poses;
+    for (int i = 0; i < frames; ++i) {
+      char t[32], t_later[32];
+      std::snprintf(t, sizeof t, "%.6f", i / 30.0);
+      std::snprintf(t_later, sizeof t_later, "%.6f", 100 + i / 30.0);
+      write_png((dir / "tum" / "depth" / (std::string(t) + ".png")).string(), fifths);
+      depth_list += std::string(t) + " depth/" + t + ".png\n";
+      poses += std::string(t) + " 0 0 0 0 0 0 1\n";
+      later += std::string(t_later) + " 0 0 0 0 0 0 1\n";
+    }
+    write_text(dir / "tum" / "depth.txt", depth_list);
+    write_text(dir / "tum" / "calibration.txt", calibration);
+    write_text(dir / "tum" / "groundtruth.txt", poses);
+    write_text(dir / "tum-other-clock.txt", later);
     std::printf("wrote %s\n", dir.string().c_str());
     return 0;
   } catch (const std::exception& e) {
