@@ -6,11 +6,14 @@
 //
 //   track_camera <sequence-dir> <trajectory.txt> [--backend cpu|cuda]
 //                [--max-frames N] [--voxels N] [--voxel-size M] [--stride N] [--tau T]
-//                [--integration paper|refined] [--behind-band F] [--silhouette-guard G] [--bilateral-radius R] [--silhouette-guard VOXELS]
-//                [--central-gradient] [--depth-weight Z] [--store float|half]
-//                [--verbose]
+//                [--integration paper|refined] [--behind-band F] [--silhouette-guard VOXELS]
+//                [--bilateral-radius R] [--central-gradient] [--depth-weight Z] [--store float|half]
+//                [--huber VOXELS] [--truncation VOXELS] [--integrate-filtered] [--verbose]
 //
 // --store half keeps the volume's SDF and weight in 16 bits (core/half.hpp).
+// --huber and --truncation change the paper's 2 and 10 voxels;
+// --integrate-filtered fuses the bilateral-filtered depth instead of the raw
+// depth (as the authors' code does). docs/tracking.md has what each changed.
 #include <chrono>
 #include <cstdio>
 #include <stdexcept>
@@ -42,6 +45,8 @@ struct Options {
   int bilateral_radius = -1;  // -1: the filter's default
   double depth_weight = 0;    // SdfAlignmentParams::depth_noise_reference; 0 = off
   std::string store = "float";
+  bool integrate_filtered = false;
+  double huber_voxels = 2, truncation_voxels = 10;
 };
 
 template <class B, class Store>
@@ -55,9 +60,10 @@ void track(const Options& o) {
   VolumeGeometry<S> geometry;
   geometry.dims = Vec3i{{o.voxels, o.voxels, o.voxels}};
   geometry.voxel_size = S(o.voxel_size);
+  geometry.truncation = S(o.truncation_voxels * o.voxel_size);
   geometry.T_world_volume = volume_pose_in_front_of(SE3<S>::identity(), S(o.voxels * o.voxel_size));
   TsdfVolume<S, B, Store> volume(geometry, backend);
-  const HuberNorm<S> huber{S(2) * volume.voxel_size()};
+  const HuberNorm<S> huber{S(o.huber_voxels) * volume.voxel_size()};
   SdfAlignmentParams<S> align;
   align.pixel_stride = o.stride;
   align.central_gradient = o.central_gradient;
@@ -91,7 +97,7 @@ void track(const Options& o) {
                                        huber, align, lm, &report);
     track_ms += ms_since(t0);
     t0 = clock::now();
-    integrate(volume, depth, camera, T_world_camera, static_cast<const Image<S, B>*>(nullptr), fusion);
+    integrate(volume, o.integrate_filtered ? filtered : depth, camera, T_world_camera, static_cast<const Image<S, B>*>(nullptr), fusion);
     integrate_ms += ms_since(t0);
     trajectory.push_back({seq.timestamp(i), T_world_camera.template cast<double>()});
     if (i > 0 && (o.verbose || !report.converged()))
@@ -113,8 +119,8 @@ Options parse(int argc, char** argv) {
       positional.push_back(a);
       continue;
     }
-    if (a == "--verbose" || a == "--central-gradient") {
-      (a == "--verbose" ? o.verbose : o.central_gradient) = true;
+    if (a == "--verbose" || a == "--central-gradient" || a == "--integrate-filtered") {
+      (a == "--verbose" ? o.verbose : a == "--central-gradient" ? o.central_gradient : o.integrate_filtered) = true;
       continue;
     }
     if (i + 1 >= argc) throw std::invalid_argument("missing value after '" + a + "'");
@@ -128,6 +134,8 @@ Options parse(int argc, char** argv) {
     else if (a == "--behind-band") o.behind_band = examples::parse_positive_double(a, v);
     else if (a == "--bilateral-radius") o.bilateral_radius = examples::parse_int(a, v, 0, 16);
     else if (a == "--silhouette-guard") o.silhouette_guard = examples::parse_positive_double(a, v);
+    else if (a == "--huber") o.huber_voxels = examples::parse_positive_double(a, v);
+    else if (a == "--truncation") o.truncation_voxels = examples::parse_positive_double(a, v);
     else if (a == "--depth-weight") o.depth_weight = examples::parse_positive_double(a, v);
     else if (a == "--store") {
       if (v != "float" && v != "half") throw std::invalid_argument("--store must be float or half");
@@ -141,7 +149,10 @@ Options parse(int argc, char** argv) {
   }
   if (positional.size() != 2)
     throw std::invalid_argument("usage: track_camera <sequence-dir> <trajectory.txt> [--backend cpu|cuda] "
-                                "[--max-frames N] [--voxels N] [--voxel-size M] [--stride N] [--tau T] [--integration paper|refined] [--behind-band F] [--silhouette-guard G] [--bilateral-radius R] [--depth-weight Z] [--central-gradient] [--store float|half] [--verbose]");
+                                "[--max-frames N] [--voxels N] [--voxel-size M] [--stride N] [--tau T] "
+                                "[--integration paper|refined] [--behind-band F] [--silhouette-guard G] "
+                                "[--bilateral-radius R] [--depth-weight Z] [--central-gradient] [--store float|half] "
+                                "[--huber VOXELS] [--truncation VOXELS] [--integrate-filtered] [--verbose]");
   o.sequence = positional[0], o.output = positional[1];
   return o;
 }
