@@ -115,15 +115,7 @@ void run(const Options& o, const B& backend) {
 
 Options parse(int argc, char** argv) {
   Options o;
-  std::vector<std::string> positional;
-  for (int i = 1; i < argc; ++i) {
-    const std::string a = argv[i];
-    if (a.rfind("--", 0) != 0) {
-      positional.push_back(a);
-      continue;
-    }
-    if (i + 1 >= argc) throw std::invalid_argument("missing value after '" + a + "'");
-    const std::string v = argv[++i];
+  const auto positional = examples::parse_command_line(argc, argv, {}, [&](const std::string& a, const std::string& v) {
     if (a == "--fuse") o.fuse = parse_range(a, v);
     else if (a == "--check") o.check = parse_range(a, v);
     else if (a == "--voxels") o.voxels = examples::parse_positive_int(a, v, 2048);
@@ -131,7 +123,7 @@ Options parse(int argc, char** argv) {
     else if (a == "--max-abs") o.max_abs = examples::parse_positive_double(a, v);
     else if (a == "--backend") o.backend = v;
     else throw std::invalid_argument("unknown option '" + a + "'");
-  }
+  });
   if (positional.size() != 2)
     throw std::invalid_argument("usage: depth_consistency <sequence-dir> <trajectory.txt> [--fuse FIRST:END] "
                                 "[--check FIRST:END] [--voxels N] [--voxel-size M] [--max-abs M] [--backend cpu|cuda]");

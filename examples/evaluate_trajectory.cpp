@@ -23,18 +23,14 @@
 int main(int argc, char** argv) {
   using namespace emfusion;
   try {
-    std::vector<std::string> positional;
     double offset = 0.0;
     bool similarity = false;
-    for (int i = 1; i < argc; ++i) {
-      const std::string a = argv[i];
-      if (a == "--similarity") similarity = true;
-      else if (a == "--offset") {
-        if (i + 1 >= argc) throw std::invalid_argument("missing value after '--offset'");
-        offset = examples::parse_double(a, argv[++i]);
-      } else if (a.rfind("--", 0) == 0) throw std::invalid_argument("unknown option '" + a + "'");
-      else positional.push_back(a);
-    }
+    const auto positional = examples::parse_command_line(
+        argc, argv, {"--similarity"}, [&](const std::string& a, const std::string& v) {
+          if (a == "--similarity") similarity = true;
+          else if (a == "--offset") offset = examples::parse_double(a, v);
+          else throw std::invalid_argument("unknown option '" + a + "'");
+        });
     if (positional.size() != 2)
       throw std::invalid_argument(
           "usage: evaluate_trajectory <groundtruth.txt> <estimate.txt> [--offset SECONDS] [--similarity]");

@@ -112,20 +112,14 @@ void track(const Options& o) {
 
 Options parse(int argc, char** argv) {
   Options o;
-  std::vector<std::string> positional;
-  for (int i = 1; i < argc; ++i) {
-    const std::string a = argv[i];
-    if (a.rfind("--", 0) != 0) {
-      positional.push_back(a);
-      continue;
-    }
-    if (a == "--verbose" || a == "--central-gradient" || a == "--integrate-filtered") {
-      (a == "--verbose" ? o.verbose : a == "--central-gradient" ? o.central_gradient : o.integrate_filtered) = true;
-      continue;
-    }
-    if (i + 1 >= argc) throw std::invalid_argument("missing value after '" + a + "'");
-    const std::string v = argv[++i];
-    if (a == "--backend") o.backend = v;
+  const auto switches = {std::string("--verbose"), std::string("--central-gradient"),
+                         std::string("--integrate-filtered")};
+  const auto positional = examples::parse_command_line(argc, argv, switches, [&](const std::string& a,
+                                                                                  const std::string& v) {
+    if (a == "--verbose") o.verbose = true;
+    else if (a == "--central-gradient") o.central_gradient = true;
+    else if (a == "--integrate-filtered") o.integrate_filtered = true;
+    else if (a == "--backend") o.backend = v;
     else if (a == "--max-frames") o.max_frames = examples::parse_positive_int(a, v);
     else if (a == "--voxels") o.voxels = examples::parse_positive_int(a, v, 2048);
     else if (a == "--stride") o.stride = examples::parse_positive_int(a, v, 16);
@@ -146,7 +140,7 @@ Options parse(int argc, char** argv) {
       o.integration = v;
     }
     else throw std::invalid_argument("unknown option '" + a + "'");
-  }
+  });
   if (positional.size() != 2)
     throw std::invalid_argument("usage: track_camera <sequence-dir> <trajectory.txt> [--backend cpu|cuda] "
                                 "[--max-frames N] [--voxels N] [--voxel-size M] [--stride N] [--tau T] "

@@ -4,8 +4,10 @@
 
 #include <cmath>
 #include <cstdlib>
+#include <initializer_list>
 #include <stdexcept>
 #include <string>
+#include <vector>
 
 namespace emfusion::examples {
 
@@ -52,6 +54,32 @@ void for_each_option(int argc, char** argv, F&& f) {
     if (i + 1 >= argc) throw std::invalid_argument("option '" + flag + "' needs a value (or is unknown)");
     f(flag, std::string(argv[i + 1]));
   }
+}
+
+/// Splits a command line into its positional arguments (returned, in order)
+/// and its options: f(flag, value) for every "--flag value", and f(flag, "")
+/// for every flag listed in `switches` (options without a value). Throws
+/// std::invalid_argument for a last option that needs a value and has none.
+template <class F>
+std::vector<std::string> parse_command_line(int argc, char** argv, std::initializer_list<std::string> switches,
+                                            F&& f) {
+  std::vector<std::string> positional;
+  for (int i = 1; i < argc; ++i) {
+    const std::string a = argv[i];
+    if (a.rfind("--", 0) != 0) {
+      positional.push_back(a);
+      continue;
+    }
+    bool is_switch = false;
+    for (const std::string& s : switches) is_switch = is_switch || a == s;
+    if (is_switch) {
+      f(a, std::string());
+      continue;
+    }
+    if (i + 1 >= argc) throw std::invalid_argument("missing value after '" + a + "'");
+    f(a, std::string(argv[++i]));
+  }
+  return positional;
 }
 
 }  // namespace emfusion::examples

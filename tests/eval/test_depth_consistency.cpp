@@ -16,9 +16,7 @@ TEMPLATE_LIST_TEST_CASE("Depth residuals are small at the true pose and grow wit
   using S = typename TestType::Scalar;
   using B = typename TestType::Backend;
   const auto camera = test::small_camera<S>();
-  sim::Scene<S> scene;
-  scene.add(sim::make_sphere(Vec3<S>::zero(), S(0.25)));
-  scene.add(sim::make_box(SE3<S>::translation(vec3(S(0.3), S(0.1), S(0))), vec3(S(0.1), S(0.2), S(0.15))));
+  const sim::Scene<S> scene = test::sphere_and_box<S>();
   TsdfVolume<S, B> volume(test::cube_around<S>(Vec3<S>::zero(), 64, S(0.01)));
   test::fuse_views(volume, scene, camera, test::orbit_poses<S>(Vec3<S>::zero(), S(1.2), 12));
 

@@ -46,6 +46,16 @@ VolumeGeometry<S> cube_around(const Vec3<S>& center, int n, S voxel) {
   return g;
 }
 
+/// A sphere of radius 0.25 m at the origin with a box beside it: curved and
+/// flat surfaces and edges within 0.4 m of the origin.
+template <class S>
+sim::Scene<S> sphere_and_box() {
+  sim::Scene<S> scene;
+  scene.add(sim::make_sphere(Vec3<S>::zero(), S(0.25)));
+  scene.add(sim::make_box(SE3<S>::translation(vec3(S(0.3), S(0.1), S(0))), vec3(S(0.1), S(0.2), S(0.15))));
+  return scene;
+}
+
 /// Renders and integrates every pose; clean synthetic depth, so by default
 /// with the refined update (IntegrationParams::refined()).
 template <class S, class B, class Store>

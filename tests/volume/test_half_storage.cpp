@@ -19,9 +19,7 @@ TEMPLATE_LIST_TEST_CASE("Half storage fuses and renders the surfaces float stora
   using S = typename TestType::Scalar;
   using B = typename TestType::Backend;
   const auto camera = test::small_camera<S>();
-  sim::Scene<S> scene;
-  scene.add(sim::make_sphere(Vec3<S>::zero(), S(0.25)));
-  scene.add(sim::make_box(SE3<S>::translation(vec3(S(0.3), S(0.1), S(0))), vec3(S(0.1), S(0.2), S(0.15))));
+  const sim::Scene<S> scene = test::sphere_and_box<S>();
   const auto geometry = test::cube_around<S>(Vec3<S>::zero(), 64, S(0.01));
   const auto poses = test::orbit_poses<S>(Vec3<S>::zero(), S(1.2), 12);
   TsdfVolume<S, B> full(geometry);
