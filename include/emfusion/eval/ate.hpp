@@ -41,12 +41,13 @@ struct AteResult {
 namespace detail {
 
 /// The scale s minimising sum |R (s a_i) + t - b_i|^2 for the rotation R of
-/// the rigid fit (Umeyama: the optimal rotation does not depend on the scale):
+/// the rigid fit (Umeyama: the optimal rotation does not depend on the scale),
+/// given the centroids ca and cb of the a_i and b_i:
 /// s = sum (b_i - cb) . R (a_i - ca) / sum |a_i - ca|^2; 1 when the a_i
 /// coincide, 0 when the b_i do (a ground truth at rest is best matched by
 /// shrinking the estimate to a point).
-inline double similarity_scale(const std::vector<Vec3d>& a, const std::vector<Vec3d>& b, const SE3<double>& rigid) {
-  const Vec3d ca = centroid(a), cb = centroid(b);
+inline double similarity_scale(const std::vector<Vec3d>& a, const std::vector<Vec3d>& b, const Vec3d& ca,
+                               const Vec3d& cb, const SE3<double>& rigid) {
   double num = 0.0, den = 0.0;
   for (std::size_t i = 0; i < a.size(); ++i) {
     const Vec3d da = a[i] - ca;
@@ -73,9 +74,9 @@ inline AteResult ate_of_positions(const std::vector<Vec3d>& est, const std::vect
   AteResult result{};
   result.T_gt_est = align_rigid(est, gt);
   if (alignment == Alignment::similarity) {
-    result.scale = detail::similarity_scale(est, gt, result.T_gt_est);
-    // With the rotation R fixed, the best translation maps the scaled centroid onto gt's.
     const Vec3d ce = detail::centroid(est), cg = detail::centroid(gt);
+    result.scale = detail::similarity_scale(est, gt, ce, cg, result.T_gt_est);
+    // With the rotation R fixed, the best translation maps the scaled centroid onto gt's.
     result.T_gt_est = SE3<double>(result.T_gt_est.rotation(), cg - result.T_gt_est.rotate(ce * result.scale));
   }
   result.matched = est.size();
