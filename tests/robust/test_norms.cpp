@@ -1,6 +1,7 @@
 // Every robust norm's IRLS weight equals its cost's derivative over the
 // residual, and the norms have the shapes their names promise.
 #include <cmath>
+#include <type_traits>
 
 #include "emfusion/robust/norms.hpp"
 #include "support/catch.hpp"
@@ -56,4 +57,23 @@ TEMPLATE_TEST_CASE("Robust norms have their characteristic shapes", "[robust]", 
   const CauchyNorm<S> cauchy{S(1)};
   CHECK(double(cauchy.weight(S(1))) == test::Approx(0.5));
   CHECK(double(L2Norm<S>{}.weight(S(100))) == 1.0);
+}
+
+TEMPLATE_TEST_CASE("A norm in voxels scales to metres", "[robust]", float, double) {
+  using S = TestType;
+  const S voxel = S(0.004);
+  // The library's norms scale their own parameter: Huber of 2 voxels is a delta of 8 mm.
+  const auto huber = scaled_norm(HuberNorm<S>{S(2)}, voxel);
+  static_assert(std::is_same_v<std::remove_const_t<decltype(huber)>, HuberNorm<S>>);
+  CHECK(double(huber.delta) == test::Approx(0.008));
+  // A user's norm without `scaled` gets ScaledNorm: the same weights as the
+  // norm of the scaled parameter, and its cost in metres squared.
+  const auto geman = scaled_norm(GemanMcClure<S>{S(3)}, voxel);
+  static_assert(std::is_same_v<std::remove_const_t<decltype(geman)>, ScaledNorm<GemanMcClure<S>, S>>);
+  const GemanMcClure<S> metres{S(3) * voxel};
+  for (double r = -0.03; r <= 0.03; r += 0.0013) {
+    CHECK(double(geman.weight(S(r))) == test::Approx(double(metres.weight(S(r)))).epsilon(1e-4));
+    CHECK(double(geman.cost(S(r))) == test::Approx(double(metres.cost(S(r)))).epsilon(1e-4).margin(1e-12));
+  }
+  check_weight_is_derivative<S>(ScaledNorm<TukeyNorm<S>, S>{TukeyNorm<S>{S(4)}, S(0.5)});
 }

@@ -3,6 +3,12 @@
 // minimising sum w(r_i) r_i^2 / 2 with the weights held fixed has the
 // stationary points of sum rho(r_i). Users add their own by providing the
 // two functions (concept RobustNorm).
+//
+// The system's norms are given in voxels of the volume a problem tracks
+// (the paper's Huber delta is 2 voxels: 2 cm for the background, a few
+// millimetres for a small object); scaled_norm(norm, voxel_size) gives the
+// norm in metres: the norm's own `scaled(s)` where it has one (every norm
+// here does), else ScaledNorm, which works for any RobustNorm.
 #pragma once
 
 #include <cmath>
@@ -23,6 +29,7 @@ template <class S>
 struct L2Norm {
   EMF_HD S cost(S r) const { return S(0.5) * r * r; }
   EMF_HD S weight(S) const { return S(1); }
+  L2Norm scaled(S) const { return *this; }
 };
 
 /// Quadratic within delta, linear beyond (the paper's tracking norm).
@@ -37,6 +44,7 @@ struct HuberNorm {
     const S a = std::fabs(r);
     return a <= delta ? S(1) : delta / a;
   }
+  HuberNorm scaled(S s) const { return {delta * s}; }
 };
 
 /// Tukey's biweight: residuals beyond c get zero weight.
@@ -53,6 +61,7 @@ struct TukeyNorm {
     const S u = S(1) - (r / c) * (r / c);
     return u * u;
   }
+  TukeyNorm scaled(S s) const { return {c * s}; }
 };
 
 /// Cauchy (Lorentzian): logarithmic growth, weight 1 / (1 + (r/c)^2).
@@ -61,8 +70,31 @@ struct CauchyNorm {
   S c = S(1);
   EMF_HD S cost(S r) const { return S(0.5) * c * c * std::log1p((r / c) * (r / c)); }
   EMF_HD S weight(S r) const { return S(1) / (S(1) + (r / c) * (r / c)); }
+  CauchyNorm scaled(S s) const { return {c * s}; }
 };
 
+/// A norm of residuals in units of `scale` applied to residuals in metres:
+/// rho(r) = scale^2 rho_N(r / scale), w(r) = w_N(r / scale), so that the
+/// IRLS weights and the cost's minimisers are those of N on r / scale.
+template <class N, class S>
+struct ScaledNorm {
+  N norm;
+  S scale = S(1);
+  EMF_HD S cost(S r) const { return scale * scale * S(norm.cost(r / scale)); }
+  EMF_HD S weight(S r) const { return S(norm.weight(r / scale)); }
+};
+
+/// `norm` (its parameters in units of `scale`, e.g. voxels) for residuals in metres.
+template <class S, class N>
+  requires RobustNorm<N, S>
+auto scaled_norm(const N& norm, S scale) {
+  if constexpr (requires { { norm.scaled(scale) } -> RobustNorm<S>; })
+    return norm.scaled(scale);
+  else
+    return ScaledNorm<N, S>{norm, scale};
+}
+
 static_assert(RobustNorm<HuberNorm<float>, float>);
+static_assert(RobustNorm<ScaledNorm<TukeyNorm<double>, double>, double>);
 
 }  // namespace emfusion

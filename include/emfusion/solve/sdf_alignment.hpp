@@ -170,21 +170,21 @@ SdfAlignmentTerms<S, Store> make_sdf_alignment(const TsdfVolume<S, B, Store>& vo
 }
 
 /// Minimises the robust SDF alignment cost over the camera pose in the
-/// volume's frame with Levenberg-Marquardt, starting at `T_volume_camera`;
-/// returns the solved T_volume_camera. Use it when the volume's own pose is
-/// what is estimated (a moving object): it avoids a round trip through the
-/// volume's world pose. `cache` (optional) keeps the per-term buffers of
-/// the solve between calls, saving their allocation (LinearizationCache);
-/// `run_on` (optional) is the backend the solve's work runs on instead of
-/// the volume's, e.g. a CUDA stream of its own so that solves from several
-/// host threads overlap (ConcurrentLanes). Each solve needs its own cache.
-template <class S, Backend B, class Store, class Norm>
-  requires RobustNorm<Norm, S>
+/// volume's frame with `solver` (a PoseSolver: LevenbergMarquardt,
+/// GaussNewton or the user's own), starting at `T_volume_camera`; returns the
+/// solved T_volume_camera. Use it when the volume's own pose is what is
+/// estimated (a moving object): it avoids a round trip through the volume's
+/// world pose. `cache` (optional) keeps the per-term buffers of the solve
+/// between calls, saving their allocation (LinearizationCache); `run_on`
+/// (optional) is the backend the solve's work runs on instead of the
+/// volume's, e.g. a CUDA stream of its own so that solves from several host
+/// threads overlap (ConcurrentLanes). Each solve needs its own cache.
+template <class S, Backend B, class Store, class Norm, class Solver>
+  requires RobustNorm<Norm, S> && PoseSolver<Solver, S>
 SE3<S> align_in_volume(const TsdfVolume<S, B, Store>& volume, const Image<Vec3<S>, B>& points,
                        const Image<S, B>* association, const SE3<S>& T_volume_camera, const Norm& norm,
-                       const SdfAlignmentParams<S>& params = {}, const LevenbergMarquardtParams& lm = {},
-                       SolveReport* report = nullptr, LinearizationCache<S, B>* cache = nullptr,
-                       const B* run_on = nullptr) {
+                       const SdfAlignmentParams<S>& params, const Solver& solver, SolveReport* report = nullptr,
+                       LinearizationCache<S, B>* cache = nullptr, const B* run_on = nullptr) {
   auto terms = make_sdf_alignment(volume, points, association, params);
   const B& backend = run_on ? *run_on : volume.backend();
   // Pixels without association add nothing: skip them in every iteration.
@@ -198,19 +198,42 @@ SE3<S> align_in_volume(const TsdfVolume<S, B, Store>& volume, const Image<Vec3<S
   const auto lin = [&](const SE3<S>& T, const SE3<S>* reference) {
     return linearize(backend, terms, norm, T, reference, values);
   };
-  return levenberg_marquardt(lin, T_volume_camera, lm, report);
+  return solver.solve(lin, T_volume_camera, report);
+}
+
+/// align_in_volume with Levenberg-Marquardt of parameters `lm`.
+template <class S, Backend B, class Store, class Norm>
+  requires RobustNorm<Norm, S>
+SE3<S> align_in_volume(const TsdfVolume<S, B, Store>& volume, const Image<Vec3<S>, B>& points,
+                       const Image<S, B>* association, const SE3<S>& T_volume_camera, const Norm& norm,
+                       const SdfAlignmentParams<S>& params = {}, const LevenbergMarquardtParams& lm = {},
+                       SolveReport* report = nullptr, LinearizationCache<S, B>* cache = nullptr,
+                       const B* run_on = nullptr) {
+  return align_in_volume(volume, points, association, T_volume_camera, norm, params, LevenbergMarquardt{lm}, report,
+                         cache, run_on);
 }
 
 /// Tracks a camera against a volume: minimises the robust SDF alignment cost
-/// over T_world_camera with Levenberg-Marquardt, starting at `T_world_camera`.
+/// over T_world_camera with `solver`, starting at `T_world_camera`.
+template <class S, Backend B, class Store, class Norm, class Solver>
+  requires RobustNorm<Norm, S> && PoseSolver<Solver, S>
+SE3<S> align_to_volume(const TsdfVolume<S, B, Store>& volume, const Image<Vec3<S>, B>& points,
+                       const Image<S, B>* association, const SE3<S>& T_world_camera, const Norm& norm,
+                       const SdfAlignmentParams<S>& params, const Solver& solver, SolveReport* report = nullptr,
+                       LinearizationCache<S, B>* cache = nullptr) {
+  return volume.pose() * align_in_volume(volume, points, association, volume.pose().inverse() * T_world_camera,
+                                         norm, params, solver, report, cache);
+}
+
+/// align_to_volume with Levenberg-Marquardt of parameters `lm`.
 template <class S, Backend B, class Store, class Norm>
   requires RobustNorm<Norm, S>
 SE3<S> align_to_volume(const TsdfVolume<S, B, Store>& volume, const Image<Vec3<S>, B>& points,
                        const Image<S, B>* association, const SE3<S>& T_world_camera, const Norm& norm,
                        const SdfAlignmentParams<S>& params = {}, const LevenbergMarquardtParams& lm = {},
                        SolveReport* report = nullptr, LinearizationCache<S, B>* cache = nullptr) {
-  return volume.pose() * align_in_volume(volume, points, association, volume.pose().inverse() * T_world_camera,
-                                         norm, params, lm, report, cache);
+  return align_to_volume(volume, points, association, T_world_camera, norm, params, LevenbergMarquardt{lm}, report,
+                         cache);
 }
 
 }  // namespace emfusion

@@ -1,4 +1,6 @@
-// Gauss-Newton and Levenberg-Marquardt on SE(3).
+// Gauss-Newton and Levenberg-Marquardt on SE(3), as functions and as
+// PoseSolver types (LevenbergMarquardt, GaussNewton) that the system and
+// the alignment functions take as a template argument.
 //
 // A solver sees the problem only as a callable `linearize(T, reference)`
 // returning the NormalEquations6 at pose T (residuals, IRLS weights and cost
@@ -21,6 +23,7 @@
 #include <concepts>
 #include <limits>
 #include <string>
+#include <utility>
 
 #include "emfusion/core/se3.hpp"
 #include "emfusion/solve/normal_equations.hpp"
@@ -258,5 +261,47 @@ SE3<S> gauss_newton(F&& linearize, const SE3<S>& start, const GaussNewtonParams&
   if (report_out) *report_out = report;
   return pose.T_s;
 }
+
+namespace detail {
+/// A problem with no terms: a PoseSolver is checked against it.
+struct NoTerms {
+  template <class S>
+  NormalEquations6 operator()(const SE3<S>&, const SE3<S>*) const {
+    return {};
+  }
+};
+}  // namespace detail
+
+/// What the system needs from a solver of a pose problem: `solve(linearize,
+/// start, report)` minimises the problem behind `linearize` (a Linearizer:
+/// normal equations at a pose, with the costs at a reference pose) from
+/// `start`, returns the pose and fills the report (`converged()` says
+/// whether the pose may be used). The two solvers below are models of it.
+template <class Solver, class S>
+concept PoseSolver = std::copyable<Solver> && requires(const Solver& solver, const SE3<S>& start, SolveReport* r) {
+  { solver.solve(detail::NoTerms{}, start, r) } -> std::same_as<SE3<S>>;
+};
+
+/// levenberg_marquardt as a PoseSolver (the system's default).
+struct LevenbergMarquardt {
+  LevenbergMarquardtParams params{};
+  template <class F, class S>
+    requires Linearizer<F, S>
+  SE3<S> solve(F&& linearize, const SE3<S>& start, SolveReport* report = nullptr) const {
+    return levenberg_marquardt(std::forward<F>(linearize), start, params, report);
+  }
+};
+
+/// gauss_newton as a PoseSolver.
+struct GaussNewton {
+  GaussNewtonParams params{};
+  template <class F, class S>
+    requires Linearizer<F, S>
+  SE3<S> solve(F&& linearize, const SE3<S>& start, SolveReport* report = nullptr) const {
+    return gauss_newton(std::forward<F>(linearize), start, params, report);
+  }
+};
+
+static_assert(PoseSolver<LevenbergMarquardt, float> && PoseSolver<GaussNewton, double>);
 
 }  // namespace emfusion
