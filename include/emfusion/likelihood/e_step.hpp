@@ -71,7 +71,7 @@ struct EStepPixel {
     S total = S(0);
     const bool valid = std::isfinite(p.x()) && std::isfinite(p.y()) && std::isfinite(p.z());
     for (int k = 0; k < model_count; ++k) {
-      const S l = valid ? S(models[k].likelihood(T_volume_camera[k] * p)) : S(0);
+      const S l = valid ? likelihood_of(models[k], T_volume_camera[k] * p, p) : S(0);
       out[k][i] = l;
       total += l;
     }

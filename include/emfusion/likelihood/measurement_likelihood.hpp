@@ -4,16 +4,24 @@
 // models into association likelihoods.
 //
 // A model is any copyable type with a device-callable
-//   S likelihood(const Vec3<S>& p) const
-// taking the point in the model's volume frame. `PaperLikelihood` is the
-// model of the paper (eq. 7):
+//   S likelihood(const Vec3<S>& p_volume) const
+// taking the point in the model's volume frame, or
+//   S likelihood(const Vec3<S>& p_volume, const Vec3<S>& p_camera) const
+// which also sees the point in the camera frame (its depth, for a noise
+// model that grows with it). `PaperLikelihood` is the model of the paper
+// (eq. 7):
 //   alpha * Laplace(|sdf(p)|; sigma) * p_fg(p) + (1 - alpha) * p_U
-// inside the model's volume and 0 outside it. Users substitute their own type
-// (examples/custom_likelihood.cpp shows one) without touching the library.
+// inside the model's volume and 0 outside it. The system evaluates one type
+// of model on the background and on every object: a VolumeLikelihood, whose
+// `volume` and `foreground` members it points at each one's maps. Users
+// substitute their own type, with parameters of their own, without touching
+// the library: examples/custom_likelihood.cpp defines one whose Laplace
+// scale grows with depth and runs it through the full system.
 #pragma once
 
 #include <cmath>
 #include <concepts>
+#include <type_traits>
 
 #include "emfusion/core/host_device.hpp"
 #include "emfusion/core/math.hpp"
@@ -22,11 +30,48 @@
 
 namespace emfusion {
 
-/// What the E-step needs from a likelihood model.
+/// What the E-step needs from a likelihood model: the likelihood of a point
+/// given in the model's volume frame (and, in the second form, also in the
+/// camera frame).
 template <class M, class S>
-concept MeasurementLikelihood = std::copyable<M> && requires(const M& model, const Vec3<S>& p_volume) {
-  { model.likelihood(p_volume) } -> std::convertible_to<S>;
-};
+concept MeasurementLikelihood =
+    std::copyable<M> && (requires(const M& model, const Vec3<S>& p_volume) {
+      { model.likelihood(p_volume) } -> std::convertible_to<S>;
+    } || requires(const M& model, const Vec3<S>& p_volume, const Vec3<S>& p_camera) {
+      { model.likelihood(p_volume, p_camera) } -> std::convertible_to<S>;
+    });
+
+/// The likelihood of `model` for a point (volume and camera frame), in
+/// whichever form the model has.
+template <class S, class M>
+EMF_HD S likelihood_of(const M& model, const Vec3<S>& p_volume, const Vec3<S>& p_camera) {
+  if constexpr (requires { model.likelihood(p_volume, p_camera); })
+    return S(model.likelihood(p_volume, p_camera));
+  else
+    return S(model.likelihood(p_volume));
+}
+
+/// A likelihood model over a TSDF volume and its foreground counts, as the
+/// system uses one for the background and every object: the system copies
+/// the model the user configured and points `volume` and `foreground` at
+/// each model's maps (`foreground` is empty for the background). Copied to
+/// the backend as bytes, so trivially copyable.
+template <class M, class S>
+concept VolumeLikelihood = MeasurementLikelihood<M, S> && std::is_trivially_copyable_v<M> &&
+                           requires(M& model, TsdfView<S, const S> volume, ForegroundView<S, const float> fg) {
+                             model.volume = volume;
+                             model.foreground = fg;
+                           };
+
+/// `prototype` pointed at a volume and its foreground counts (empty: none).
+template <class S, class M>
+  requires VolumeLikelihood<M, S>
+M bind_volume(const M& prototype, TsdfView<S, const S> volume, ForegroundView<S, const float> foreground = {}) {
+  M model = prototype;
+  model.volume = volume;
+  model.foreground = foreground;
+  return model;
+}
 
 /// Parameters of eq. 7 (paper and reference values).
 template <class S>
@@ -64,7 +109,7 @@ struct PaperLikelihood {
   }
 };
 
-static_assert(MeasurementLikelihood<PaperLikelihood<float>, float>);
-static_assert(MeasurementLikelihood<PaperLikelihood<double>, double>);
+static_assert(VolumeLikelihood<PaperLikelihood<float>, float>);
+static_assert(VolumeLikelihood<PaperLikelihood<double>, double>);
 
 }  // namespace emfusion
