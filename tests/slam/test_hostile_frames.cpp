@@ -636,7 +636,6 @@ TEMPLATE_LIST_TEST_CASE("Hostile frames: a frame that pulls tracking away is ref
 }
 
 TEST_CASE("Hostile frames: what a solve's report and pose make of the camera", "[slam]") {
-  using emfusion::detail::system::tracking_outcome;
   const MotionBound<double> bound;  // 0.3 m, 30 degrees
   SolveReport ok;
   ok.reason = StopReason::step_small;

@@ -3,6 +3,8 @@
 // (shared/PARAMETERS.md; docs/parameters.md explains each one).
 #pragma once
 
+#include <algorithm>
+#include <cmath>
 #include <numbers>
 #include <string>
 #include <vector>
@@ -124,6 +126,16 @@ struct SystemParams {
   // Ablations (paper Table 3).
   bool use_association = true;     ///< false: q(u) = 1 for tracking and mapping of every model
   bool use_map_confidence = true;  ///< false: no W / W_max weights in tracking
+
+  /// min_mask_pixels for a width x height image (it is given for 640x480).
+  int min_mask_pixels_for(int width, int height) const {
+    return std::max(1, int(std::lround(double(min_mask_pixels) * width * height / (640.0 * 480.0))));
+  }
+  /// visibility_border for an image `width` pixels wide (it is given for 640).
+  int visibility_border_for(int width) const { return int(std::lround(double(visibility_border) * width / 640.0)); }
+  /// An object of this class is a person kept for association only: not
+  /// rendered, not exported, never deleted as not visible (ignore_person).
+  bool ignores(const std::string& class_name) const { return ignore_person && class_name == "person"; }
 
   static LevenbergMarquardtParams fast_lm() {
     LevenbergMarquardtParams p;

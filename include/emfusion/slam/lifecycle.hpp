@@ -1,0 +1,166 @@
+// Stage 7 of the EM-Fusion frame, the object lifecycle (paper sec. 3.5 and
+// 4.2 with the reference implementation's rules): an object is deleted when
+// its existence probability falls below 0.1 on a detector frame, when it is
+// no longer visible (fewer than 40x40 rendered or associated pixels inside a
+// 20-pixel border), or when its mean association over its rendered mask
+// falls below 0.1. One deleted as not visible is kept as lost for
+// re-identification (an extension of the paper; docs/system.md).
+#pragma once
+
+#include <algorithm>
+#include <cstddef>
+#include <memory>
+#include <utility>
+#include <vector>
+
+#if defined(__GLIBC__)
+#include <malloc.h>
+#endif
+
+#include "emfusion/core/parallel.hpp"
+#include "emfusion/slam/frame.hpp"
+#include "emfusion/slam/frame_result.hpp"
+#include "emfusion/slam/map.hpp"
+#include "emfusion/slam/params.hpp"
+
+namespace emfusion {
+
+/// What the deletion rules count of one object over the image: its
+/// rendered pixels, the association summed over them, and the pixels inside
+/// the visibility border that it renders or that the E-step gives it (q > 0.5).
+struct ObjectPixels {
+  double association_sum = 0;
+  int rendered = 0, rendered_inner = 0, associated_inner = 0;
+  EMF_HD ObjectPixels operator+(const ObjectPixels& o) const {
+    return {association_sum + o.association_sum, rendered + o.rendered, rendered_inner + o.rendered_inner,
+            associated_inner + o.associated_inner};
+  }
+};
+
+namespace detail::lifecycle {
+
+template <class S>
+struct CountObjectPixels {
+  ImageView<const int> label;
+  ImageView<const S> association;  // empty: not computed this frame
+  int model, border;
+  EMF_HD ObjectPixels operator()(int i) const {
+    const int u = i % label.width, v = i / label.width;
+    const bool inner = u >= border && v >= border && u < label.width - border && v < label.height - border;
+    const bool drawn = label[i] == model;
+    const S q = association.empty() ? S(0) : association[i];
+    ObjectPixels p;
+    p.association_sum = drawn ? double(q) : 0.0;
+    p.rendered = drawn ? 1 : 0;
+    p.rendered_inner = drawn && inner ? 1 : 0;
+    p.associated_inner = inner && q > S(0.5) ? 1 : 0;
+    return p;
+  }
+};
+
+struct AddObjectPixels {
+  EMF_HD ObjectPixels operator()(const ObjectPixels& a, const ObjectPixels& b) const { return a + b; }
+};
+
+}  // namespace detail::lifecycle
+
+/// Hands free heap memory back to the system. glibc keeps freed blocks
+/// below its dynamic mmap threshold (which rises to the size of the largest
+/// block freed, so object volumes land there) on its heap: without this a
+/// CPU system's resident memory stays at the peak of the object volumes it
+/// ever held (docs/system.md, "Memory bound"). A no-op with other C libraries.
+inline void release_free_host_memory() {
+#if defined(__GLIBC__)
+  malloc_trim(0);
+#endif
+}
+
+/// Map::objects[k]'s pixel counts in the frame (ObjectPixels), reduced on the backend.
+template <class S, Backend B>
+ObjectPixels object_pixels(const Frame<S, B>& frame, int k, int border) {
+  const Associations<S, B>& q = frame.associations;
+  const ImageView<const S> a = k + 1 < q.model_count() ? q.image(k + 1).view() : ImageView<const S>{};
+  return transform_reduce_index(frame.segmentation.backend(), frame.segmentation.size(),
+                                detail::lifecycle::CountObjectPixels<S>{frame.segmentation.view(), a, k + 1, border},
+                                ObjectPixels{}, detail::lifecycle::AddObjectPixels{});
+}
+
+/// What tracking did with Map::objects[k] this frame and what the deletion
+/// rules see of it (`associated`: the association images are this frame's).
+template <class S, Backend B>
+ObjectStatus object_status(const Map<S, B>& map, const Frame<S, B>& frame, int k, bool associated,
+                           const SystemParams<S>& params) {
+  const ObjectModel<S, B>& o = *map.objects[std::size_t(k)];
+  const ObjectPixels px = object_pixels(frame, k, params.visibility_border_for(frame.segmentation.width()));
+  ObjectStatus status;
+  status.id = o.id();
+  if (std::size_t(k) < frame.object_tracks.size()) {
+    status.tracking = frame.object_tracks[std::size_t(k)].outcome;
+    status.step = frame.object_tracks[std::size_t(k)].step;
+  }
+  status.rendered_pixels = px.rendered_inner;
+  status.associated_pixels = px.associated_inner;
+  // Visible where the model is drawn or where the frame's points belong
+  // to it: a model built from a few views renders a smaller mask than the
+  // object shows (about 20 % on the dynamic sequences), the E-step sees
+  // the measured object whole.
+  status.visible_pixels = std::max(px.rendered_inner, px.associated_inner);
+  if (!params.ignores(o.class_name()) && associated)
+    status.mean_association = px.rendered > 0 ? px.association_sum / px.rendered : 0.0;
+  return status;
+}
+
+/// Stage 7 on a mapped frame: applies the deletion rules to the objects
+/// that existed before the frame (all but the last `created`, which
+/// detection handling added), reports every one in result.object_status,
+/// moves those deleted as not visible to map.lost, forgets lost objects
+/// beyond lost_object_frames and max_lost_objects, and renews the grace of
+/// young objects on detector frames. `tracked`: tracking ran this frame, so
+/// association images exist for every object that existed before it.
+template <class S, Backend B>
+void delete_objects(Map<S, B>& map, const Frame<S, B>& frame, const SystemParams<S>& params, FrameResult& result,
+                    bool detector_frame, int created, bool tracked) {
+  const int old_objects = int(map.objects.size()) - created;
+  const int min_pixels = params.min_mask_pixels_for(frame.segmentation.width(), frame.segmentation.height());
+  // Grace lasts until the object is first seen or the detector runs again.
+  if (detector_frame) map.young.clear();
+  const auto young = [&](int id) { return std::find(map.young.begin(), map.young.end(), id) != map.young.end(); };
+  std::vector<DeletionReason> why(map.objects.size(), DeletionReason::none);
+  const bool associated = params.use_association && tracked;
+  for (int k = 0; k < old_objects; ++k) {
+    const ObjectModel<S, B>& o = *map.objects[std::size_t(k)];
+    ObjectStatus status = object_status(map, frame, k, associated, params);
+    if (detector_frame && o.existence_probability() < params.min_existence)
+      why[std::size_t(k)] = DeletionReason::existence;
+    else if (!params.ignores(o.class_name()) && status.visible_pixels < min_pixels && !young(o.id()))
+      why[std::size_t(k)] = DeletionReason::not_visible;
+    if (status.visible_pixels >= min_pixels) std::erase(map.young, o.id());
+    else if (status.mean_association < params.min_association)
+      why[std::size_t(k)] = DeletionReason::weak_association;
+    status.deleted = why[std::size_t(k)];
+    result.object_status.push_back(status);
+  }
+  std::vector<std::unique_ptr<ObjectModel<S, B>>> keep;
+  for (std::size_t k = 0; k < map.objects.size(); ++k) {
+    if (why[k] == DeletionReason::none) {
+      keep.push_back(std::move(map.objects[k]));
+      continue;
+    }
+    ObjectRecord& rec = map.record_of(map.objects[k]->id());
+    rec.deleted = true;
+    rec.reason = why[k];
+    result.deleted.push_back(map.objects[k]->id());
+    if (why[k] == DeletionReason::not_visible && params.lost_object_frames > 0 && params.max_lost_objects > 0)
+      map.lost.push_back(LostObject<S, B>{std::move(map.objects[k]), map.frames});
+  }
+  map.objects = std::move(keep);
+  // Lost objects are forgotten when too old, the oldest first beyond the cap.
+  std::erase_if(map.lost, [&](const LostObject<S, B>& l) { return map.frames - l.lost_at > params.lost_object_frames; });
+  while (int(map.lost.size()) > params.max_lost_objects) map.lost.erase(map.lost.begin());
+  if (detector_frame && params.young_object_grace) {
+    map.young = result.created;
+    map.young.insert(map.young.end(), result.reidentified.begin(), result.reidentified.end());
+  }
+}
+
+}  // namespace emfusion

@@ -1,0 +1,108 @@
+// The state the EM-Fusion system estimates and carries from frame to frame:
+// the background TSDF, the live objects (ObjectModel: volume, foreground
+// counts, pose, existence), the lost ones kept for re-identification, the
+// camera pose, and the trajectories and records of everything so far. The
+// stages (slam/*.hpp) read and write a Map they are handed; System owns one.
+#pragma once
+
+#include <algorithm>
+#include <cstddef>
+#include <memory>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "emfusion/core/backend.hpp"
+#include "emfusion/core/se3.hpp"
+#include "emfusion/core/timed_pose.hpp"
+#include "emfusion/slam/frame_result.hpp"
+#include "emfusion/slam/object_model.hpp"
+#include "emfusion/slam/params.hpp"
+#include "emfusion/volume/tsdf_volume.hpp"
+
+namespace emfusion {
+
+/// Everything known about an object ever created, kept after deletion.
+struct ObjectRecord {
+  int id = 0;
+  std::string class_name;
+  double first_timestamp = 0, last_timestamp = 0;
+  bool deleted = false;
+  DeletionReason reason = DeletionReason::none;
+  bool person = false;     ///< class person with ignore_person: not rendered or exported
+  Trajectory trajectory;   ///< T_world_object per frame it existed
+};
+
+/// An object deleted as not visible, kept for re-identification
+/// (docs/system.md, "Lost objects"): neither tracked, rendered nor mapped.
+template <class S, Backend B>
+struct LostObject {
+  std::unique_ptr<ObjectModel<S, B>> object;
+  int lost_at = 0;  ///< the frame it was deleted as not visible
+};
+
+/// The background volume of `p`: background_voxels^3 voxels with the first
+/// camera at the centre of one face (DESIGN.md section 1). Validates `p`.
+template <class S>
+VolumeGeometry<S> background_geometry(const SystemParams<S>& p) {
+  p.validate();
+  VolumeGeometry<S> g;
+  g.dims = Vec3i{{p.background_voxels, p.background_voxels, p.background_voxels}};
+  g.voxel_size = p.background_voxel_size;
+  g.truncation = p.truncation_voxels * p.background_voxel_size;
+  g.T_world_volume = volume_pose_in_front_of(SE3<S>::identity(), S(p.background_voxels) * p.background_voxel_size);
+  return g;
+}
+
+template <class S, Backend B = Host>
+struct Map {
+  using Object = ObjectModel<S, B>;
+
+  /// An empty map: the background of `params`, no objects, the camera at the identity.
+  explicit Map(const SystemParams<S>& params, B backend = B{}) : background(background_geometry(params), backend) {}
+
+  TsdfVolume<S, B> background;
+  /// Live objects, in creation order; association image and segmentation
+  /// label k + 1 of a frame are objects[k].
+  std::vector<std::unique_ptr<Object>> objects;
+  std::vector<LostObject<S, B>> lost;  ///< oldest first
+  /// Ids created or re-identified on the last detector frame: spared the
+  /// visibility rule until first seen (SystemParams::young_object_grace).
+  std::vector<int> young;
+  std::vector<ObjectRecord> records;  ///< every object ever created, in creation order
+  int next_id = 1;
+
+  SE3<S> T_world_camera = SE3<S>::identity();  ///< the camera of the last frame
+  Trajectory camera_trajectory;
+  int frames = 0;        ///< frames processed
+  bool started = false;  ///< a frame has been mapped (the first camera defines the world)
+
+  ObjectRecord& record_of(int id) {
+    for (ObjectRecord& r : records)
+      if (r.id == id) return r;
+    throw std::logic_error("Map: no record for object " + std::to_string(id));
+  }
+
+  /// Bytes of the models on the backend: the background and every live and
+  /// lost object's volume and foreground counts (docs/system.md, "Memory bound").
+  std::size_t memory_bytes() const {
+    std::size_t bytes = background.memory_bytes();
+    for (const auto& o : objects) bytes += o->memory_bytes();
+    for (const auto& l : lost) bytes += l.object->memory_bytes();
+    return bytes;
+  }
+
+  /// Appends the frame's poses to the camera's and every live object's trajectory.
+  void record_poses(double timestamp) {
+    camera_trajectory.push_back({timestamp, T_world_camera.template cast<double>()});
+    for (const auto& o : objects) {
+      ObjectRecord& r = record_of(o->id());
+      if (r.trajectory.empty()) r.first_timestamp = timestamp;
+      r.last_timestamp = timestamp;
+      r.class_name = o->class_name();
+      r.trajectory.push_back({timestamp, o->pose().template cast<double>()});
+    }
+  }
+};
+
+}  // namespace emfusion

@@ -1,0 +1,74 @@
+// Stage 6 of the EM-Fusion frame, the M-step for the maps: the depth is
+// integrated into the background and every live object with its association
+// image as the per-pixel weight (paper eq. 10; a new object's first frame
+// uses its detection mask), and every object a detection matched or created
+// updates its foreground counts from that detection's mask where no other
+// object covers the pixel (eq. 6).
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <vector>
+
+#include "emfusion/core/camera.hpp"
+#include "emfusion/detect/detection.hpp"
+#include "emfusion/slam/detection_masks.hpp"
+#include "emfusion/slam/frame.hpp"
+#include "emfusion/slam/map.hpp"
+#include "emfusion/slam/params.hpp"
+#include "emfusion/volume/foreground.hpp"
+#include "emfusion/volume/integrate.hpp"
+
+namespace emfusion {
+
+/// Integrates frame.depth at map.T_world_camera into every model (eq. 10):
+/// model k with weights frame.associations.image(k), the last fresh.size()
+/// objects (added by detection handling) with their first-view weights.
+/// `first`: the frame that starts the map, which has no association images;
+/// the background then takes every pixel with weight 1.
+template <class S, Backend B>
+void integrate_models(Map<S, B>& map, const Frame<S, B>& frame, const PinholeCamera<S>& camera,
+                      const SystemParams<S>& params, const std::vector<NewObjectWeights<S, B>>& fresh, bool first,
+                      IntegrationWorkspace<S, B>* workspace = nullptr) {
+  const std::size_t old_objects = map.objects.size() - fresh.size();
+  integrate(map.background, frame.depth, camera, map.T_world_camera, first ? nullptr : &frame.associations.image(0),
+            params.background_integration, workspace);
+  for (std::size_t k = 0; k < map.objects.size(); ++k) {
+    const Image<S, B>* weights =
+        k < old_objects ? &frame.associations.image(int(k) + 1) : &fresh[k - old_objects].weights;
+    integrate(map.objects[k]->volume(), frame.depth, camera, map.T_world_camera, weights, params.object_integration,
+              workspace);
+  }
+}
+
+/// Eq. 6 for every object detection d matched (`object_of[d]`) or created
+/// (`fresh`), where no other object is drawn (`seg`, the segmentation on
+/// the host that matching used).
+template <class S, Backend B>
+void update_foreground_counts(Map<S, B>& map, const Frame<S, B>& frame, const Detections& det,
+                              const std::vector<int>& seg, const std::vector<int>& object_of,
+                              const std::vector<NewObjectWeights<S, B>>& fresh, const PinholeCamera<S>& camera) {
+  const std::size_t old_objects = map.objects.size() - fresh.size();
+  const std::uint16_t* labels = det.labels.view().data;
+  const B& backend = frame.depth.backend();
+  const auto to_backend = [&](const std::vector<std::uint8_t>& v) {
+    return Image<std::uint8_t, Host>::from_host(camera.width, camera.height, v).template to<B>(backend);
+  };
+  const auto update = [&](ObjectModel<S, B>& o, int model_label, const Image<std::uint8_t, B>& mask) {
+    std::vector<std::uint8_t> counted(seg.size());
+    for (std::size_t i = 0; i < seg.size(); ++i) counted[i] = !(seg[i] > 0 && seg[i] != model_label);
+    update_foreground(o.foreground(), o.volume().pose(), o.volume().truncation(), frame.depth, mask,
+                      to_backend(counted), camera, map.T_world_camera, backend);
+  };
+  for (std::size_t d = 0; d < object_of.size(); ++d) {
+    const int k = object_of[d];
+    if (k < 0 || std::size_t(k) >= old_objects) continue;
+    std::vector<std::uint8_t> mask(seg.size());
+    for (std::size_t i = 0; i < seg.size(); ++i) mask[i] = labels[i] == det.instances[d].label;
+    update(*map.objects[std::size_t(k)], k + 1, to_backend(mask));
+  }
+  for (std::size_t j = 0; j < fresh.size(); ++j)
+    update(*map.objects[old_objects + j], int(old_objects + j) + 1, fresh[j].mask);
+}
+
+}  // namespace emfusion

@@ -1,0 +1,126 @@
+// Stage 4 of the EM-Fusion frame (paper sec. 3.5, "raycasting for
+// visualization and generation of model masks"): every live object is
+// raycast at the current poses where its voxels' p_fg exceeds
+// SystemParams::min_foreground, the nearest surface winning each pixel; an
+// object pixel lies behind the background by more than the occlusion
+// margin loses to it. The result is frame.segmentation: the model masks that
+// detection matching and the deletion rules read.
+#pragma once
+
+#include <utility>
+
+#include "emfusion/core/camera.hpp"
+#include "emfusion/core/parallel.hpp"
+#include "emfusion/slam/frame.hpp"
+#include "emfusion/slam/map.hpp"
+#include "emfusion/slam/params.hpp"
+#include "emfusion/volume/raycast.hpp"
+
+namespace emfusion {
+
+/// Images rendering keeps between frames.
+template <class S, Backend B>
+struct RenderWorkspace {
+  Image<S, B> object_depth;        ///< the nearest object surface per pixel
+  Image<S, B> background_ray_end;  ///< where the background's rays stop
+  RaycastResult<S, B> background;  ///< the background's rendering, where objects were drawn
+};
+
+namespace detail::rendering {
+
+/// Keeps, per pixel, the nearest object surface of all objects raycast so far.
+template <class S>
+struct NearestObject {
+  ImageView<const S> depth;
+  ImageView<S> best_depth;
+  ImageView<int> label;
+  int model;
+  EMF_HD void operator()(int i) const {
+    const S d = depth[i];
+    if (!(d > S(0))) return;
+    if (best_depth[i] > S(0) && !(d < best_depth[i])) return;
+    best_depth[i] = d;
+    label[i] = model;
+  }
+};
+
+/// Where the background's rays end: `margin` in front of the object drawn
+/// at the pixel (nothing drawn or too near: 0, no ray).
+template <class S>
+struct BackgroundRayEnd {
+  ImageView<const S> object_depth;
+  ImageView<S> end;
+  S margin;
+  EMF_HD void operator()(int i) const {
+    const S d = object_depth[i] - margin;
+    end[i] = object_depth[i] > S(0) && d > S(0) ? d : S(0);
+  }
+};
+
+/// The background wins a pixel where no object was drawn, or where the
+/// object lies more than `margin` behind the background surface (rendered
+/// only where objects were drawn). Pixels without an object are background
+/// where the frame has a point, and nothing (-1) elsewhere.
+template <class S>
+struct ResolveBackground {
+  ImageView<const S> background;  // empty when there are no objects
+  ImageView<const S> object_depth;
+  ImageView<int> label;
+  S margin;
+  ImageView<const Vec3<S>> points;
+  EMF_HD void operator()(int i) const {
+    if (label[i] > 0) {
+      const S bg = background.empty() ? S(0) : background[i];
+      if (bg > S(0) && object_depth[i] > bg + margin) label[i] = 0;
+      return;
+    }
+    label[i] = is_valid(points[i]) ? 0 : -1;
+  }
+};
+
+}  // namespace detail::rendering
+
+/// Renders every live object (ObjectModel::rendering) and the segmentation
+/// of the frame (frame.segmentation) at map.T_world_camera. Person objects
+/// that params.ignores are not drawn.
+template <class S, Backend B>
+void render_models(Map<S, B>& map, Frame<S, B>& frame, const PinholeCamera<S>& camera, const SystemParams<S>& params,
+                   RenderWorkspace<S, B>& ws) {
+  const B& backend = frame.points.backend();
+  RaycastParams<S> rp;
+  rp.min_foreground = params.min_foreground;
+  const int w = camera.width, h = camera.height;
+  if (!frame.segmentation.same_size(w, h)) frame.segmentation = Image<int, B>(w, h, -1, backend);
+  if (!ws.object_depth.same_size(w, h)) ws.object_depth = Image<S, B>(w, h, S(0), backend);
+  // Nearest object per pixel first; then the background, rendered only
+  // where an object was drawn (elsewhere nothing competes with it) and
+  // only up to the depth where it would lose.
+  ws.object_depth.fill(S(0));
+  frame.segmentation.fill(-1);
+  for (std::size_t k = 0; k < map.objects.size(); ++k) {
+    ObjectModel<S, B>& o = *map.objects[k];
+    if (params.ignores(o.class_name())) continue;
+    raycast(o.volume(), camera, map.T_world_camera, o.rendering(), rp, &o.foreground());
+    for_each_index(backend, w * h,
+                   detail::rendering::NearestObject<S>{std::as_const(o).rendering().depth.view(),
+                                                       ws.object_depth.view(), frame.segmentation.view(),
+                                                       int(k) + 1});
+  }
+  if (!map.objects.empty()) {
+    // The background wins only in front of object depth - margin: its
+    // rays stop there.
+    if (!ws.background_ray_end.same_size(w, h)) ws.background_ray_end = Image<S, B>(w, h, S(0), backend);
+    for_each_index(backend, w * h,
+                   detail::rendering::BackgroundRayEnd<S>{std::as_const(ws.object_depth).view(),
+                                                          ws.background_ray_end.view(), params.occlusion_margin});
+    raycast(map.background, camera, map.T_world_camera, ws.background, rp,
+            static_cast<const ForegroundCounts<S, B>*>(nullptr), &std::as_const(ws.background_ray_end));
+  }
+  const ImageView<const S> bg = map.objects.empty() ? ImageView<const S>{} : std::as_const(ws.background).depth.view();
+  for_each_index(backend, w * h,
+                 detail::rendering::ResolveBackground<S>{bg, std::as_const(ws.object_depth).view(),
+                                                         frame.segmentation.view(), params.occlusion_margin,
+                                                         frame.points.view()});
+}
+
+}  // namespace emfusion
