@@ -25,7 +25,7 @@
 #include "emfusion/slam/system.hpp"
 #include "memory.hpp"
 #include "report.hpp"
-#include "synthetic.hpp"
+#include "support/workload.hpp"
 #include "support/args.hpp"
 #include "support/backend.hpp"
 
@@ -48,7 +48,7 @@ struct Sample {
 
 template <class B>
 int run(const Options& o) {
-  bench::SyntheticRoom room = bench::synthetic_room(o.frames, o.width, o.objects);
+  examples::SyntheticRoom room = examples::synthetic_room(o.frames, o.width, o.objects);
   const sim::DynamicSceneParams& p = room.params;
   const sim::SyntheticSequence& seq = room.sequence;
   sim::SimulatedDetector<float>& detector = room.detector;

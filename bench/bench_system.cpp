@@ -32,7 +32,7 @@
 #include "support/args.hpp"
 #include "memory.hpp"
 #include "report.hpp"
-#include "synthetic.hpp"
+#include "support/workload.hpp"
 #include "support/backend.hpp"
 
 using namespace emfusion;
@@ -46,50 +46,6 @@ struct Options {
   double voxel_size = 0.01;
 };
 
-/// Frames, detections and ground truth, all read before timing starts.
-struct Workload {
-  PinholeCamera<double> camera;
-  std::vector<double> timestamps;
-  std::vector<Image<float, Host>> depth;
-  std::vector<std::optional<Detections>> detections;
-  std::optional<Trajectory> camera_truth;
-  std::map<std::string, Trajectory> object_truth;
-};
-
-Workload load(const Options& o) {
-  Workload w;
-  if (!o.sequence.empty()) {
-    const TumSequence seq = TumSequence::open(o.sequence);
-    const std::size_t n = std::min<std::size_t>(seq.size(), std::size_t(o.frames));
-    w.camera = seq.camera();
-    std::optional<MaskDirectory> masks;
-    const std::string dir = (std::filesystem::path(o.sequence) / "masks").string();
-    if (std::filesystem::exists(std::filesystem::path(dir) / "masks.txt"))
-      masks = MaskDirectory::open(dir, w.camera.width, w.camera.height);
-    for (std::size_t i = 0; i < n; ++i) {
-      w.timestamps.push_back(seq.timestamp(i));
-      w.depth.push_back(seq.depth(i));
-      w.detections.push_back(masks ? masks->detect(int(i), seq.timestamp(i)) : std::nullopt);
-    }
-    w.camera_truth = seq.ground_truth();
-    for (auto& [name, traj] : seq.ground_truth_objects()) w.object_truth[name] = traj;
-    return w;
-  }
-  bench::SyntheticRoom room = bench::synthetic_room(o.frames, o.width, o.objects);
-  const sim::SyntheticSequence& seq = room.sequence;
-  sim::SimulatedDetector<float>& detector = room.detector;
-  w.camera = seq.camera();
-  for (std::size_t i = 0; i < seq.size(); ++i) {
-    w.timestamps.push_back(seq.timestamp(i));
-    w.depth.push_back(seq.depth(i));
-    w.detections.push_back(detector.detect(int(i), seq.timestamp(i)));
-  }
-  w.camera_truth = seq.scene().camera_trajectory();
-  for (int k = 0; k < seq.scene().object_count(); ++k)
-    w.object_truth[seq.scene().object_name(k)] = seq.scene().object_trajectory(k);
-  return w;
-}
-
 struct Stats {
   double median = 0, p90 = 0;
 };
@@ -102,7 +58,7 @@ Stats stats(std::vector<double> v) {
 
 template <class B>
 void run(const Options& o) {
-  const Workload w = load(o);
+  const examples::Workload w = examples::load_workload(o.sequence, o.frames, o.width, o.objects);
   SystemParams<S> params;
   params.background_voxels = o.voxels;
   params.background_voxel_size = S(o.voxel_size);
