@@ -539,6 +539,29 @@ TEST_CASE("read_exr names unsupported features", "[io][exr]") {
   wide[box + 21 + 8 + 2] = 0x20;  // x max = 2 + 2^21
   CHECK(contains(error("wide.exr", wide), "too large"));
 
+  // Sizes OpenEXR would allocate before checking them, refused first: an
+  // attribute claiming more bytes than the file has (the fuzz target's
+  // 1.7 GB), a name longer than the format allows, tiles larger than the
+  // image.
+  std::string huge = hand_built(ones);
+  const std::size_t order = huge.find(std::string("lineOrder\0lineOrder\0\x01\0\0\0", 24));
+  REQUIRE(order != std::string::npos);
+  huge[order + 20 + 3] = 0x69;
+  CHECK(contains(error("huge.exr", huge), "attribute 'lineOrder' at byte " + std::to_string(order) +
+                                              " claims 1761607681 bytes, more than the file holds"));
+  std::string named = hand_built(ones);
+  named.insert(8, std::string(40, 'n') + '\0' + "int" + '\0' + std::string("\x04\0\0\0\0\0\0\0", 8));
+  CHECK(contains(error("named.exr", named), "longer than 31 characters"));
+  std::string tiled = hand_built(ones, 1, "depth", 2 | 0x200);
+  std::string description;
+  le32(description, 4096);
+  le32(description, 16);
+  description += '\0';
+  std::string tiles;
+  attribute(tiles, "tiles", "tiledesc", description);
+  tiled.insert(8, tiles);
+  CHECK(contains(error("tiles.exr", tiled), "tiles of 4096x16 pixels for an image of 3x2: too large"));
+
   // An unknown compression code.
   std::string bytes = hand_built(ones);
   const std::string key = std::string("compression\0compression\0\x01\0\0\0", 28);

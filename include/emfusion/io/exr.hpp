@@ -12,8 +12,10 @@
 // '.', so "ViewLayer.Depth.Z" counts as Z); renderers that write depth into
 // R, G and B write the same value to each. The chosen channel must be HALF
 // (converted exactly) or FLOAT and not subsampled; multi-part and deep files
-// are refused. The data window is bounded (1 << 20 pixels a side, 1 << 28 in
-// all) before any pixel memory is allocated.
+// are refused. Before OpenEXR sees the header, its attributes are walked to
+// check that each fits in the file, the data window is bounded (1 << 20
+// pixels a side, 1 << 28 in all) and tiles may not exceed the image (or 256
+// pixels a side): OpenEXR allocates after those fields first and checks later.
 //
 // decode_exr reads a file's bytes in memory (tests/fuzz/ does).
 //
@@ -28,6 +30,7 @@
 // the file and saying so. docs/io.md has the rules.
 #pragma once
 
+#include <algorithm>
 #include <cctype>
 #include <cstddef>
 #include <cstdint>
@@ -101,6 +104,7 @@ inline const std::string& unavailable() {
 }
 
 // Version field flags above its low byte (the format version).
+constexpr std::uint32_t long_names_flag = 0x400;
 constexpr std::uint32_t deep_flag = 0x800;
 constexpr std::uint32_t multipart_flag = 0x1000;
 
@@ -163,6 +167,86 @@ inline std::size_t choose_channel(const std::vector<Channel>& channels, const st
   problem = "cannot tell the depth channel among " + channel_list(channels) +
             ": expected one channel, or one named Z, depth, Y or R; name the channel to read";
   return 0;
+}
+
+/// The sizes that check_header read from a header.
+struct HeaderBounds {
+  bool has_window = false;
+  std::int64_t x_min = 0, y_min = 0, x_max = 0, y_max = 0;
+  bool has_tiles = false;
+  std::uint32_t tile_width = 0, tile_height = 0;
+};
+
+inline std::uint32_t le_u32(const unsigned char* p) {
+  return std::uint32_t(p[0]) | std::uint32_t(p[1]) << 8 | std::uint32_t(p[2]) << 16 | std::uint32_t(p[3]) << 24;
+}
+
+inline std::int32_t le_i32(const unsigned char* p) {
+  const std::uint32_t v = le_u32(p);
+  std::int32_t out;
+  std::memcpy(&out, &v, 4);  // two's complement, without overflow
+  return out;
+}
+
+/// Walks the attributes of a single-part header ("name\0type\0<int32
+/// size><value>" up to an empty name) in the `size` bytes at `d`, checking
+/// only that each fits in the file, and notes the data window and the tile
+/// size. OpenEXR allocates what an attribute's size field says before it
+/// reads the value, and its tables and buffers after the data window and
+/// the tile size, so without this a few hostile bytes make it ask for
+/// gigabytes (the fuzz target found an attribute claiming 1.7 GB in a file
+/// of 248 bytes). Returns the problem, or "" with `bounds` filled in.
+inline std::string check_header(const unsigned char* d, std::size_t size, bool long_names, HeaderBounds& bounds) {
+  const auto str = [](auto value) { return std::to_string(value); };
+  const std::size_t longest = long_names ? 255 : 31;
+  std::size_t pos = 8;
+  const auto read_name = [&](const char* what, std::string& name) -> std::string {
+    const std::size_t limit = std::min(size, pos + longest + 1);
+    const void* end = pos < size ? std::memchr(d + pos, 0, limit - pos) : nullptr;
+    if (!end) {
+      if (limit == size) return std::string("truncated header: the ") + what + " at byte " + str(pos) + " is cut off";
+      return std::string("corrupt header: the ") + what + " at byte " + str(pos) + " is longer than " + str(longest) +
+             " characters";
+    }
+    name.assign(reinterpret_cast<const char*>(d + pos), static_cast<const unsigned char*>(end) - (d + pos));
+    pos += name.size() + 1;
+    return {};
+  };
+  for (;;) {
+    const std::size_t start = pos;
+    std::string name, type;
+    if (std::string problem = read_name("attribute name", name); !problem.empty()) return problem;
+    if (name.empty()) return {};
+    if (std::string problem = read_name("attribute type", type); !problem.empty()) return problem;
+    if (size - pos < 4) return "truncated header: attribute '" + name + "' at byte " + str(start) + " is cut off";
+    const std::int32_t n = le_i32(d + pos);
+    pos += 4;
+    if (n < 0 || std::size_t(n) > size - pos)
+      return "corrupt header: attribute '" + name + "' at byte " + str(start) + " claims " + str(n) +
+             " bytes, more than the file holds";
+    const unsigned char* value = d + pos;
+    if (name == "dataWindow" && type == "box2i" && n == 16) {
+      bounds.has_window = true;
+      bounds.x_min = le_i32(value), bounds.y_min = le_i32(value + 4);
+      bounds.x_max = le_i32(value + 8), bounds.y_max = le_i32(value + 12);
+    }
+    if (name == "tiles" && type == "tiledesc" && n == 9) {
+      bounds.has_tiles = true;
+      bounds.tile_width = le_u32(value), bounds.tile_height = le_u32(value + 4);
+    }
+    pos += std::size_t(n);
+  }
+}
+
+/// The reader's bounds on a data window: "" if it is within them.
+inline std::string check_window(std::int64_t x_min, std::int64_t y_min, std::int64_t x_max, std::int64_t y_max) {
+  const auto str = [](auto value) { return std::to_string(value); };
+  const std::int64_t width = x_max - x_min + 1, height = y_max - y_min + 1;
+  if (width < 1 || height < 1)
+    return "empty data window (" + str(x_min) + ", " + str(y_min) + ") - (" + str(x_max) + ", " + str(y_max) + ")";
+  if (width > max_side || height > max_side || width * height > max_pixels)
+    return "data window of " + str(width) + "x" + str(height) + " pixels: too large";
+  return {};
 }
 
 #if EMFUSION_HAS_OPENEXR
@@ -276,6 +360,21 @@ inline Image<float, Host> decode_exr(const void* data, std::size_t size, const s
       std::uint32_t(d[4]) | std::uint32_t(d[5]) << 8 | std::uint32_t(d[6]) << 16 | std::uint32_t(d[7]) << 24;
   if (version & exr::multipart_flag) bad("unsupported feature: multi-part file (only single-part images)");
   if (version & exr::deep_flag) bad("unsupported feature: deep data (only flat images)");
+  exr::HeaderBounds bounds;
+  if (std::string problem = exr::check_header(d, size, version & exr::long_names_flag, bounds); !problem.empty())
+    bad(problem);
+  if (bounds.has_window) {
+    if (std::string problem = exr::check_window(bounds.x_min, bounds.y_min, bounds.x_max, bounds.y_max);
+        !problem.empty())
+      bad(problem);
+    // A tile larger than the image (or than 256 pixels a side) serves no
+    // purpose but to make OpenEXR allocate its buffers.
+    const std::int64_t width = bounds.x_max - bounds.x_min + 1, height = bounds.y_max - bounds.y_min + 1;
+    if (bounds.has_tiles && (bounds.tile_width > std::max<std::int64_t>(width, 256) ||
+                             bounds.tile_height > std::max<std::int64_t>(height, 256)))
+      bad("tiles of " + str(bounds.tile_width) + "x" + str(bounds.tile_height) + " pixels for an image of " +
+          str(width) + "x" + str(height) + ": too large");
+  }
 
   exr::MemoryInput stream(d, size, name);
   const std::unique_ptr<Imf::InputFile> file =
@@ -284,12 +383,8 @@ inline Image<float, Host> decode_exr(const void* data, std::size_t size, const s
 
   const Imath::Box2i window = header.dataWindow();
   const std::int64_t x_min = window.min.x, y_min = window.min.y, x_max = window.max.x, y_max = window.max.y;
-  const std::int64_t width64 = x_max - x_min + 1, height64 = y_max - y_min + 1;
-  if (width64 < 1 || height64 < 1)
-    bad("empty data window (" + str(x_min) + ", " + str(y_min) + ") - (" + str(x_max) + ", " + str(y_max) + ")");
-  if (width64 > exr::max_side || height64 > exr::max_side || width64 * height64 > exr::max_pixels)
-    bad("data window of " + str(width64) + "x" + str(height64) + " pixels: too large");
-  const int width = int(width64), height = int(height64);
+  if (std::string problem = exr::check_window(x_min, y_min, x_max, y_max); !problem.empty()) bad(problem);
+  const int width = int(x_max - x_min + 1), height = int(y_max - y_min + 1);
 
   std::vector<exr::Channel> channels;
   std::vector<std::pair<int, int>> sampling;
