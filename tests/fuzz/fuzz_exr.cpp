@@ -4,7 +4,7 @@
 // back with write_exr in each lossless compression (through one temporary
 // file per process, in /dev/shm when there is one, removed at exit) must
 // read back bit for bit. OpenEXR's own limits on image and tile sizes are
-// set far below the reader's (1024 pixels a side, 256 a tile side) so that
+// set far below the reader's (256 pixels a side, 64 a tile side) so that
 // a few hostile header bytes cannot make one run allocate hundreds of
 // megabytes; without OpenEXR every input is the error that says so.
 #include <cstddef>
@@ -46,8 +46,8 @@ inline bool limit_openexr() {
 #if EMFUSION_HAS_OPENEXR
   // One thread: a crash is then reported in the thread that read the input.
   Imf::setGlobalThreadCount(0);
-  Imf::Header::setMaxImageSize(1024, 1024);
-  Imf::Header::setMaxTileSize(256, 256);
+  Imf::Header::setMaxImageSize(256, 256);
+  Imf::Header::setMaxTileSize(64, 64);
 #endif
   return true;
 }
