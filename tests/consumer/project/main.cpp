@@ -1,14 +1,25 @@
 // Downstream smoke test of the installed emfusion package: SE3 exp/log round
-// trip and a host reduction over an image. Exits non-zero on a wrong result.
+// trip, a host reduction over an image, and an EXR round trip through
+// emfusion::io (whose OpenEXR, when the library was built with it, the
+// package config must find again; without it, the error that says so).
+// Exits non-zero on a wrong result.
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <filesystem>
 #include <functional>
+#include <stdexcept>
+#include <string>
 #include <vector>
 
 #include <emfusion/core/image.hpp>
 #include <emfusion/core/parallel.hpp>
 #include <emfusion/core/se3.hpp>
+#include <emfusion/io/exr.hpp>
+
+#ifndef EMFUSION_HAS_OPENEXR
+#define EMFUSION_HAS_OPENEXR 0
+#endif
 
 int main() {
   int failures = 0;
@@ -38,6 +49,23 @@ int main() {
   if (sum != expected) {
     std::fprintf(stderr, "consumer: transform_reduce_index sum %g, expected %g\n", sum, expected);
     ++failures;
+  }
+
+  // EXR through emfusion::io.
+  const std::string exr = (std::filesystem::temp_directory_path() / "emfusion-consumer-depth.exr").string();
+  try {
+    emfusion::write_exr(exr, image);
+    const bool same = emfusion::read_exr(exr).to_host() == pixels;
+    std::filesystem::remove(exr);
+    if (!same || !EMFUSION_HAS_OPENEXR) {
+      std::fprintf(stderr, "consumer: EXR round trip %s\n", same ? "worked without OpenEXR" : "changed the pixels");
+      ++failures;
+    }
+  } catch (const std::runtime_error& e) {
+    if (EMFUSION_HAS_OPENEXR || std::string(e.what()).find("no OpenEXR support") == std::string::npos) {
+      std::fprintf(stderr, "consumer: EXR round trip failed: %s\n", e.what());
+      ++failures;
+    }
   }
 
   if (failures == 0) std::printf("consumer: ok (SE3 round trip error %g, image sum %g)\n", max_err, sum);
