@@ -549,6 +549,22 @@ TEST_CASE("read_exr names unsupported features", "[io][exr]") {
   huge[order + 20 + 3] = 0x69;
   CHECK(contains(error("huge.exr", huge), "attribute 'lineOrder' at byte " + std::to_string(order) +
                                               " claims 1761607681 bytes, more than the file holds"));
+  // Values OpenEXR reads by their own layout must have the size their size
+  // field says, or OpenEXR reads on from the wrong place (the fuzz target's
+  // channel list that ran into a 2 GB "attribute").
+  std::string longer = hand_built(ones);
+  const std::string compression_key = std::string("compression\0compression\0\x01\0\0\0", 28);
+  const std::size_t compression_at = longer.find(compression_key);
+  REQUIRE(compression_at != std::string::npos);
+  longer[compression_at + 24] = 2;
+  longer.insert(compression_at + 28, 1, '\0');
+  CHECK(contains(error("longer.exr", longer), "attribute 'compression' at byte " + std::to_string(compression_at) +
+                                                  " (type 'compression', 2 bytes): a value of this type has 1 bytes"));
+  std::string list = hand_built(ones);
+  const std::size_t list_at = list.find(std::string("channels\0chlist\0", 16));
+  REQUIRE(list_at != std::string::npos);
+  list[list_at + 16] = char(list[list_at + 16] - 1);  // the final NUL left outside
+  CHECK(contains(error("list.exr", list), "not a channel list of that size"));
   std::string named = hand_built(ones);
   named.insert(8, std::string(40, 'n') + '\0' + "int" + '\0' + std::string("\x04\0\0\0\0\0\0\0", 8));
   CHECK(contains(error("named.exr", named), "longer than 31 characters"));

@@ -37,6 +37,7 @@
 #include <cstring>
 #include <stdexcept>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "emfusion/core/backend.hpp"
@@ -58,7 +59,6 @@
 #include <cerrno>
 #include <cstdio>
 #include <memory>
-#include <utility>
 #endif
 
 namespace emfusion {
@@ -188,14 +188,53 @@ inline std::int32_t le_i32(const unsigned char* p) {
   return out;
 }
 
+/// Size of the value of OpenEXR's attribute types whose values have one
+/// (which OpenEXR reads whatever the size field says), else -1.
+inline int fixed_value_size(const std::string& type) {
+  static const std::pair<const char*, int> sizes[] = {{"box2i", 16},      {"box2f", 16},
+                                                      {"compression", 1}, {"lineOrder", 1},
+                                                      {"envmap", 1},      {"deepImageState", 1},
+                                                      {"float", 4},       {"double", 8},
+                                                      {"int", 4},         {"v2i", 8},
+                                                      {"v2f", 8},         {"v2d", 16},
+                                                      {"v3i", 12},        {"v3f", 12},
+                                                      {"v3d", 24},        {"m33f", 36},
+                                                      {"m33d", 72},       {"m44f", 64},
+                                                      {"m44d", 128},      {"chromaticities", 32},
+                                                      {"keycode", 28},    {"rational", 8},
+                                                      {"timecode", 8},    {"tiledesc", 9}};
+  for (const auto& [name, bytes] : sizes)
+    if (type == name) return bytes;
+  return -1;
+}
+
+/// Whether the `n` bytes at `value` are exactly a channel list: entries
+/// "name\0<16 bytes>" (names of 1 to 255 characters) and a final "\0".
+inline bool exact_channel_list(const unsigned char* value, std::size_t n) {
+  std::size_t p = 0;
+  for (;;) {
+    const void* zero = p < n ? std::memchr(value + p, 0, std::min<std::size_t>(n - p, 256)) : nullptr;
+    if (!zero) return false;
+    const std::size_t length = std::size_t(static_cast<const unsigned char*>(zero) - (value + p));
+    p += length + 1;
+    if (length == 0) return p == n;
+    if (n - p < 16) return false;
+    p += 16;
+  }
+}
+
 /// Walks the attributes of a single-part header ("name\0type\0<int32
 /// size><value>" up to an empty name) in the `size` bytes at `d`, checking
-/// only that each fits in the file, and notes the data window and the tile
-/// size. OpenEXR allocates what an attribute's size field says before it
-/// reads the value, and its tables and buffers after the data window and
-/// the tile size, so without this a few hostile bytes make it ask for
-/// gigabytes (the fuzz target found an attribute claiming 1.7 GB in a file
-/// of 248 bytes). Returns the problem, or "" with `bounds` filled in.
+/// that each fits in the file and that the values OpenEXR reads by their
+/// own layout (fixed-size types, channel lists, previews) have the size the
+/// size field says, and notes the data window and the tile size. OpenEXR
+/// allocates what an attribute's size field says before it reads the value,
+/// reads on where a value's own layout ends (not where its size field says),
+/// and sizes its tables and buffers after the data window and the tile
+/// size: without this a few hostile bytes make it ask for gigabytes (the
+/// fuzz target found an attribute claiming 1.7 GB in a file of 248 bytes,
+/// then a channel list running past its size into a 2 GB one). Returns the
+/// problem, or "" with `bounds` filled in.
 inline std::string check_header(const unsigned char* d, std::size_t size, bool long_names, HeaderBounds& bounds) {
   const auto str = [](auto value) { return std::to_string(value); };
   const std::size_t longest = long_names ? 255 : 31;
@@ -225,6 +264,14 @@ inline std::string check_header(const unsigned char* d, std::size_t size, bool l
       return "corrupt header: attribute '" + name + "' at byte " + str(start) + " claims " + str(n) +
              " bytes, more than the file holds";
     const unsigned char* value = d + pos;
+    const std::string attribute = "corrupt header: attribute '" + name + "' at byte " + str(start) + " (type '" + type +
+                                  "', " + str(n) + " bytes)";
+    if (const int fixed = fixed_value_size(type); fixed >= 0 && n != fixed)
+      return attribute + ": a value of this type has " + str(fixed) + " bytes";
+    if (type == "chlist" && !exact_channel_list(value, std::size_t(n)))
+      return attribute + ": not a channel list of that size";
+    if (type == "preview" && (n < 8 || std::uint64_t(le_u32(value)) * le_u32(value + 4) * 4 != std::uint64_t(n) - 8))
+      return attribute + ": not a preview image of that size";
     if (name == "dataWindow" && type == "box2i" && n == 16) {
       bounds.has_window = true;
       bounds.x_min = le_i32(value), bounds.y_min = le_i32(value + 4);
