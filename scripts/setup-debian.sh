@@ -18,6 +18,7 @@ EMFUSION_DEBIAN_PACKAGES=(
   zlib1g-dev
   libpng-dev
   libjpeg-dev
+  libopenexr-dev
   clang
   libclang-rt-14-dev
 )

@@ -2,8 +2,10 @@
 """Writes the binary seeds of tests/fuzz/corpus (klg/, exr/, png/): tiny
 files made here from scratch with the standard library, valid ones and
 near-valid ones (truncated, a wrong size, a corrupt stream). The text seeds
-of the other targets are written by hand. Run from anywhere; it rewrites
-the files it owns and leaves the others alone."""
+of the other targets are written by hand; the EXR seeds of other
+compressions and layouts (openexr_*.exr) by make_exr_seeds.cpp through
+OpenEXR. Run from anywhere; it rewrites the files it owns and leaves the
+others alone."""
 import os
 import struct
 import zlib

@@ -2,7 +2,8 @@
 // timestamps from the frame rate, depth in metres from EXR, the camera from
 // the options, calibration.txt or colour/calibration.txt, and bad folders
 // (missing folders or files, gaps, wrong image sizes), each error naming the
-// folder or file.
+// folder or file. Depth frames are EXR: built without OpenEXR, only the
+// error that says so is tested.
 #include <cmath>
 #include <cstdint>
 #include <cstdio>
@@ -30,6 +31,8 @@ static_assert(FrameSource<CoFusionSequence>);
 namespace {
 
 constexpr int W = 5, H = 3;
+
+#if EMFUSION_HAS_OPENEXR
 
 /// Depth of frame n: 1 + n/10 + pixel/100 metres.
 Image<float, Host> frame_depth(long n, int width = W, int height = H) {
@@ -169,3 +172,22 @@ TEST_CASE("CoFusionSequence reports bad folders and files", "[io][cofusion]") {
     CHECK(contains(error_of([&] { seq.depth(0); }), "read_exr: '" + dir.file("depth/Depth0000.exr") + "'"));
   }
 }
+
+#else  // EMFUSION_HAS_OPENEXR
+
+}  // namespace
+
+TEST_CASE("CoFusionSequence without OpenEXR fails reading depth, naming the file and the missing library",
+          "[io][cofusion]") {
+  ScratchDir dir;
+  dir.write("calibration.txt", "4 4.5 2 1 5 3\n");
+  fs::create_directories(dir.file("colour"));
+  write_png(dir.file("colour/Color0000.png"), Image<std::uint8_t, Host>(W, H, 128));
+  dir.write("depth/Depth0000.exr", "not read: this build cannot read EXR");
+  const CoFusionSequence seq = CoFusionSequence::open(dir.path());
+  const std::string e = error_of([&] { seq.depth(0); });
+  CHECK(contains(e, "read_exr: '" + dir.file("depth/Depth0000.exr") + "'"));
+  CHECK(contains(e, "no OpenEXR support"));
+}
+
+#endif  // EMFUSION_HAS_OPENEXR

@@ -1,17 +1,23 @@
 // Downstream smoke test of the installed emfusion package: SE3 exp/log round
-// trip, a host reduction over an image, and a few frames of the full system
-// with a likelihood and a robust norm defined here, as a user's own. Exits
-// non-zero on a wrong result.
+// trip, a host reduction over an image, an EXR round trip through
+// emfusion::io (whose OpenEXR, when the library was built with it, the
+// package config must find again; without it, the error that says so), and
+// a few frames of the full system with a likelihood and a robust norm
+// defined here, as a user's own. Exits non-zero on a wrong result.
 #include <algorithm>
 #include <cstdint>
 #include <cmath>
 #include <cstdio>
+#include <filesystem>
 #include <functional>
+#include <stdexcept>
+#include <string>
 #include <vector>
 
 #include <emfusion/core/image.hpp>
 #include <emfusion/core/parallel.hpp>
 #include <emfusion/core/se3.hpp>
+#include <emfusion/io/exr.hpp>
 #include <emfusion/sim/primitives.hpp>
 #include <emfusion/sim/render.hpp>
 #include <emfusion/slam/system.hpp>
@@ -81,6 +87,10 @@ int run_system() {
 
 }  // namespace
 
+#ifndef EMFUSION_HAS_OPENEXR
+#define EMFUSION_HAS_OPENEXR 0
+#endif
+
 int main() {
   int failures = 0;
 
@@ -111,10 +121,27 @@ int main() {
     ++failures;
   }
 
+  // EXR through emfusion::io.
+  const std::string exr = (std::filesystem::temp_directory_path() / "emfusion-consumer-depth.exr").string();
+  try {
+    emfusion::write_exr(exr, image);
+    const bool same = emfusion::read_exr(exr).to_host() == pixels;
+    std::filesystem::remove(exr);
+    if (!same || !EMFUSION_HAS_OPENEXR) {
+      std::fprintf(stderr, "consumer: EXR round trip %s\n", same ? "worked without OpenEXR" : "changed the pixels");
+      ++failures;
+    }
+  } catch (const std::runtime_error& e) {
+    if (EMFUSION_HAS_OPENEXR || std::string(e.what()).find("no OpenEXR support") == std::string::npos) {
+      std::fprintf(stderr, "consumer: EXR round trip failed: %s\n", e.what());
+      ++failures;
+    }
+  }
+
   failures += run_system();
 
   if (failures == 0)
-    std::printf("consumer: ok (SE3 round trip error %g, image sum %g, 5 system frames with a user's likelihood and norm)\n",
+    std::printf("consumer: ok (SE3 round trip error %g, image sum %g, EXR, 5 system frames with a user's likelihood and norm)\n",
                 max_err, sum);
   return failures == 0 ? 0 : 1;
 }

@@ -1,7 +1,6 @@
-// zlib streams for the binary formats of io/ (.klg depth frames, OpenEXR ZIP
-// blocks): inflating a stream that must decode to an exact number of bytes,
-// which tells a short, long or corrupt stream apart in words, and deflating
-// a buffer.
+// zlib streams for the .klg depth frames of io/: inflating a stream that
+// must decode to an exact number of bytes, which tells a short, long or
+// corrupt stream apart in words, and deflating a buffer.
 #pragma once
 
 #include <climits>
