@@ -26,7 +26,7 @@
 set -u
 app=$1 case=$2 work=$3
 scene=synthetic:room-small
-frames=12   # requested; the signal comes well before the end
+frames=40   # requested; the signal comes well before the end, even on a fast machine
 K=3         # camera poses on disk before the signal
 
 fail() { echo "FAIL ($case): $*" >&2; [ -f "$work/log.txt" ] && sed 's/^/  log: /' "$work/log.txt" >&2; exit 1; }
@@ -162,9 +162,9 @@ case $case in
       "$1" run "$3" --max-frames "$4" --output "$2" >"$5/log.txt" 2>&1
       echo $? >"$5/status"
       cp -r "$2" "$5/left" 2>/dev/null
-      exit 0' _ "$app" "$work/out" "$scene" "$frames" "$work"
+      exit 0' _ "$app" "$work/out" "$scene" 3 "$work"
     [ $? = 77 ] && skip "cannot mount a tmpfs"
-    status=$(cat "$work/status")
+    status=$(cat "$work/status" 2>/dev/null)
     [ "$status" = 1 ] || fail "exit status $status, expected 1"
     grep -q "^emfusion: error: .*'$work/out/[^']*': .*No space left on device" "$work/log.txt" ||
       fail "not an error naming a file of the output and the full disk"
