@@ -72,7 +72,7 @@ TEST_CASE("A streamed trajectory refuses what write_tum_trajectory refuses, addi
   CHECK(contains(e, "is not after the previous one"));
   TimedPose bad = poses[1];
   bad.timestamp += 1;
-  bad.pose = SE3<double>::from_quaternion(0, 0, 0, 1, vec3(std::nan(""), 0, 0));
+  bad.pose = SE3<double>::from_quaternion(0, 0, 0, 1, vec3(std::nan(""), 0.0, 0.0));
   CHECK_THROWS_AS(stream.append(bad), std::invalid_argument);
   stream.close();
   CHECK(stream.size() == 1);
