@@ -19,6 +19,9 @@
 #   fullfs           a 64 KiB tmpfs as the output (needs `unshare -m` and
 #                    mount, so root; else skipped): a clear error when the
 #                    disk fills, no half-written file under a final name
+#   fills            the same with a 1 MiB tmpfs that a file fills after the
+#                    K-th pose: a clear error at the next write, the frames
+#                    before it kept
 #   readonly         an output directory that cannot be written (chmod 0555;
 #                    as root, where modes do not stop writes, chattr +i; else
 #                    skipped): a clear error before the first frame
@@ -172,6 +175,39 @@ case $case in
     # What is there under a final name is whole.
     find "$work/left" -name '*.tmp' | grep -q . && fail "a .tmp file was left"
     [ -f "$work/left/camera.txt" ] && check_tum "$work/left/camera.txt"
+    for f in "$work/left"/objects/*.txt; do [ -f "$f" ] && check_tum "$f"; done
+    ;;
+  fills)
+    command -v unshare >/dev/null || skip "no unshare"
+    mkdir -p "$work/out"
+    unshare -m true 2>/dev/null || skip "cannot make a mount namespace (not root?)"
+    unshare -m bash -c '
+      mount -t tmpfs -o size=1m tmpfs "$2" || exit 77
+      "$1" run "$3" --max-frames "$4" --output "$2" >"$5/log.txt" 2>&1 &
+      pid=$!
+      for i in $(seq 3000); do
+        [ "$(grep -cv "^#" "$2/camera.txt" 2>/dev/null)" -ge "$6" ] 2>/dev/null && break
+        kill -0 $pid 2>/dev/null || break
+        sleep 0.1
+      done
+      grep -cv "^#" "$2/camera.txt" >"$5/poses-before-fill" 2>/dev/null
+      dd if=/dev/zero of="$2/fill" bs=4k 2>/dev/null
+      for i in $(seq 3000); do kill -0 $pid 2>/dev/null || break; sleep 0.1; done
+      kill -KILL $pid 2>/dev/null
+      wait $pid
+      echo $? >"$5/status"
+      rm -f "$2/fill"
+      cp -r "$2" "$5/left" 2>/dev/null
+      exit 0' _ "$app" "$work/out" "$scene" "$frames" "$work" "$K"
+    [ $? = 77 ] && skip "cannot mount a tmpfs"
+    status=$(cat "$work/status" 2>/dev/null)
+    [ "$status" = 1 ] || fail "exit status $status, expected 1"
+    grep -q "^emfusion: error: .*'$work/out/[^']*': .*No space left on device" "$work/log.txt" ||
+      fail "not an error naming a file of the output and the full disk"
+    find "$work/left" -name '*.tmp' | grep -q . && fail "a .tmp file was left"
+    check_tum "$work/left/camera.txt"
+    [ "$(poses "$work/left/camera.txt")" -ge "$(cat "$work/poses-before-fill")" ] || fail "camera.txt lost poses"
+    [ "$(poses "$work/left/camera.txt")" -lt "$frames" ] || fail "the run did not stop at the full disk"
     for f in "$work/left"/objects/*.txt; do [ -f "$f" ] && check_tum "$f"; done
     ;;
   readonly)
