@@ -463,8 +463,8 @@ void run(const RunOptions& o) {
 
   const B backend{};
   System<S, B> system(in.camera.cast<S>(), params, backend);
-  // run.json, finished or interrupted, has everything up to "settings";
-  // a run.json that stays "running" is a run killed before its end.
+  // run.json is written before the first frame, saying "running", and
+  // replaced at the end: one that still says so is a run killed on the way.
   const auto run_summary = [&](JsonWriter& json, const char* status, std::size_t processed) {
     json.begin().string("input", o.input).string("backend", B::name).string("detector", in.detector);
     json.string("status", status).integer("frames", (long long)processed);
