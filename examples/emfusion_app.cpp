@@ -373,7 +373,8 @@ std::vector<ObjectListEntry> object_list(const std::vector<ObjectRecord>& record
 /// run stopped at any moment keeps them (docs/user-guide.md, "Stopping a
 /// run"): camera.txt and objects/<id>.txt appended and flushed after each
 /// frame, synced to the disk about once a second; objects.txt replaced whole
-/// (temporary file and rename) when it changes.
+/// (temporary file and rename) when an object comes or goes, and once a
+/// second for the last timestamps.
 class StreamedOutputs {
  public:
   explicit StreamedOutputs(const std::string& dir)
@@ -405,14 +406,18 @@ class StreamedOutputs {
         stream.flush();
       }
     }
+    // fdatasync costs about a millisecond per file here, and so does a
+    // rename over objects.txt (ext4 writes the new data first): a new,
+    // deleted or re-identified object is written at once, the last
+    // timestamps of live objects once a second, as the syncs.
+    const auto now = std::chrono::steady_clock::now();
+    const bool due = now - last_sync_ >= std::chrono::seconds(1);
     std::vector<ObjectListEntry> list = object_list(records);
-    if (list != list_) {
+    if (list != list_ && (due || !same_objects(list, list_))) {
       write_object_list(list_path(), list);
       list_ = std::move(list);
     }
-    // fdatasync costs milliseconds: once a second bounds what a power loss takes.
-    const auto now = std::chrono::steady_clock::now();
-    if (now - last_sync_ >= std::chrono::seconds(1)) {
+    if (due) {
       sync();
       last_sync_ = now;
     }
@@ -432,6 +437,13 @@ class StreamedOutputs {
       if (entry.second.is_open()) entry.second.sync();
   }
   std::string list_path() const { return (fs::path(dir_) / "objects.txt").string(); }
+  /// The same objects in the same state, whatever their last timestamps.
+  static bool same_objects(const std::vector<ObjectListEntry>& a, const std::vector<ObjectListEntry>& b) {
+    return std::equal(a.begin(), a.end(), b.begin(), b.end(), [](const ObjectListEntry& x, const ObjectListEntry& y) {
+      return x.id == y.id && x.class_name == y.class_name && x.first_timestamp == y.first_timestamp &&
+             x.deleted == y.deleted;
+    });
+  }
 
   std::string dir_;
   TumTrajectoryStream camera_;
