@@ -22,7 +22,10 @@
 // --calibration and --intrinsics (only one of them) replace the camera of
 // every recorded input. Masks come from --masks, else <dir>/masks when it has
 // a masks.txt. With ground truth, `run` ends by printing the camera and
-// object errors.
+// object errors. The trajectories are written as the frames go; SIGINT or
+// SIGTERM stops a run after the frame in progress with every output written
+// for the frames processed, and exit status 130 / 143 (docs/user-guide.md,
+// "Stopping a run").
 #include <unistd.h>
 
 #include <algorithm>
@@ -53,12 +56,14 @@
 #include "emfusion/io/pictures.hpp"
 #include "emfusion/io/ply.hpp"
 #include "emfusion/io/run_outputs.hpp"
+#include "emfusion/io/trajectory_stream.hpp"
 #include "emfusion/io/tum.hpp"
 #include "emfusion/sim/detector.hpp"
 #include "emfusion/sim/dynamic_scene.hpp"
 #include "emfusion/slam/system.hpp"
 #include "emfusion/volume/marching_cubes.hpp"
 #include "support/backend.hpp"
+#include "support/interrupt.hpp"
 
 using namespace emfusion;
 using S = float;
@@ -356,6 +361,97 @@ void write_pictures(const std::string& dir, std::size_t frame, const std::option
   }
 }
 
+/// objects.txt's lines for the system's records (persons are not exported).
+std::vector<ObjectListEntry> object_list(const std::vector<ObjectRecord>& records) {
+  std::vector<ObjectListEntry> list;
+  for (const ObjectRecord& r : records)
+    if (!r.person) list.push_back({r.id, r.class_name, r.first_timestamp, r.last_timestamp, r.deleted});
+  return list;
+}
+
+/// The outputs that grow with every frame, written as they grow, so that a
+/// run stopped at any moment keeps them (docs/user-guide.md, "Stopping a
+/// run"): camera.txt and objects/<id>.txt appended and flushed after each
+/// frame, synced to the disk about once a second; objects.txt replaced whole
+/// (temporary file and rename) when an object comes or goes, and once a
+/// second for the last timestamps.
+class StreamedOutputs {
+ public:
+  explicit StreamedOutputs(const std::string& dir)
+      : dir_(dir), camera_((fs::path(dir) / "camera.txt").string()), last_sync_(std::chrono::steady_clock::now()) {
+    // Replaces a previous run's list at once: it would name objects of that run.
+    write_object_list(list_path(), list_);
+  }
+
+  /// Writes what the last process() added to the camera trajectory and the
+  /// object records.
+  void update(const Trajectory& camera, const std::vector<ObjectRecord>& records) {
+    for (std::size_t k = camera_.size(); k < camera.size(); ++k) camera_.append(camera[k]);
+    camera_.flush();
+    for (const ObjectRecord& r : records) {
+      if (r.person) continue;
+      auto it = objects_.find(r.id);
+      if (it == objects_.end()) {
+        const fs::path path = fs::path(dir_) / "objects" / (std::to_string(r.id) + ".txt");
+        it = objects_.emplace(r.id, TumTrajectoryStream(path.string())).first;
+      }
+      TumTrajectoryStream& stream = it->second;
+      for (std::size_t k = stream.size(); k < r.trajectory.size(); ++k) stream.append(r.trajectory[k]);
+      // A deleted object holds no descriptor (a long run creates many); if
+      // it is re-identified, its file is reopened and continued.
+      if (r.deleted && stream.is_open()) {
+        stream.sync();
+        stream.close();
+      } else {
+        stream.flush();
+      }
+    }
+    // fdatasync costs about a millisecond per file here, and so does a
+    // rename over objects.txt (ext4 writes the new data first): a new,
+    // deleted or re-identified object is written at once, the last
+    // timestamps of live objects once a second, as the syncs.
+    const auto now = std::chrono::steady_clock::now();
+    const bool due = now - last_sync_ >= std::chrono::seconds(1);
+    std::vector<ObjectListEntry> list = object_list(records);
+    if (list != list_ && (due || !same_objects(list, list_))) {
+      write_object_list(list_path(), list);
+      list_ = std::move(list);
+    }
+    if (due) {
+      sync();
+      last_sync_ = now;
+    }
+  }
+
+  /// Syncs and closes every trajectory file, reporting any write error.
+  void close() {
+    sync();
+    camera_.close();
+    for (auto& entry : objects_) entry.second.close();
+  }
+
+ private:
+  void sync() {
+    camera_.sync();
+    for (auto& entry : objects_)
+      if (entry.second.is_open()) entry.second.sync();
+  }
+  std::string list_path() const { return (fs::path(dir_) / "objects.txt").string(); }
+  /// The same objects in the same state, whatever their last timestamps.
+  static bool same_objects(const std::vector<ObjectListEntry>& a, const std::vector<ObjectListEntry>& b) {
+    return std::equal(a.begin(), a.end(), b.begin(), b.end(), [](const ObjectListEntry& x, const ObjectListEntry& y) {
+      return x.id == y.id && x.class_name == y.class_name && x.first_timestamp == y.first_timestamp &&
+             x.deleted == y.deleted;
+    });
+  }
+
+  std::string dir_;
+  TumTrajectoryStream camera_;
+  std::map<int, TumTrajectoryStream> objects_;
+  std::vector<ObjectListEntry> list_;
+  std::chrono::steady_clock::time_point last_sync_;
+};
+
 template <class B>
 void run(const RunOptions& o) {
   SystemParams<S> params;
@@ -368,22 +464,51 @@ void run(const RunOptions& o) {
   const std::size_t frames = o.max_frames > 0 ? std::min<std::size_t>(in.frames, std::size_t(o.max_frames)) : in.frames;
   if (frames == 0) throw std::runtime_error("'" + o.input + "' has no frames");
   // Fail on an unwritable output before spending time on the frames.
-  create_output_directory(o.output);
-  create_output_directory((fs::path(o.output) / "objects").string());
-  create_output_directory((fs::path(o.output) / "meshes").string());
-  const std::string pictures = (fs::path(o.output) / "pictures").string();
-  if (o.pictures) create_output_directory(pictures);
+  const fs::path out(o.output);
+  const std::string pictures = (out / "pictures").string();
+  std::vector<std::string> dirs{o.output, (out / "objects").string(), (out / "meshes").string()};
+  if (o.pictures) dirs.push_back(pictures);
+  for (const std::string& dir : dirs) {
+    create_output_directory(dir);
+    check_writable_directory(dir);
+  }
 
   const B backend{};
   System<S, B> system(in.camera.cast<S>(), params, backend);
+  // run.json is written before the first frame, saying "running", and
+  // replaced at the end: one that still says so is a run killed on the way.
+  const auto run_summary = [&](JsonWriter& json, const char* status, std::size_t processed) {
+    json.begin().string("input", o.input).string("backend", B::name).string("detector", in.detector);
+    json.string("status", status).integer("frames", (long long)processed);
+    json.integer("frames_requested", (long long)frames);
+  };
+  const auto settings = [&](JsonWriter& json) {
+    json.begin("settings");
+    for (const auto& e : parameter_table<S>()) json.string(e.name, e.get(system.params()));
+    json.end();
+  };
+  {
+    JsonWriter json;
+    run_summary(json, "running", 0);
+    settings(json);
+    json.end();
+    write_text_file((out / "run.json").string(), json.str());
+  }
+  StreamedOutputs streams(o.output);
+
   std::vector<StageTimes> times;
   const bool tty = isatty(fileno(stderr));
   const auto start = std::chrono::steady_clock::now();
-  for (std::size_t i = 0; i < frames; ++i) {
+  std::size_t processed = 0;
+  // A signal stops the loop between frames; the outputs below are then
+  // those of the frames processed.
+  for (std::size_t i = 0; i < frames && examples::interrupt_signal() == 0; ++i) {
     const double t = in.timestamp(i);
     const Image<S, B> depth = in.depth(i).template to<B>(backend);
     const std::optional<Detections> det = in.detect(int(i), t);
     const FrameResult r = system.process(depth, t, det ? &*det : nullptr);
+    processed = i + 1;
+    streams.update(system.camera_trajectory(), system.object_records());
     times.push_back(r.times);
     if (o.pictures) write_pictures(pictures, i, in.colour(i), system, r);
     if (o.verbose) {
@@ -415,31 +540,38 @@ void run(const RunOptions& o) {
       std::fprintf(stderr, "frame %zu/%zu: %.1f fps, %d objects\n", i + 1, frames, fps, r.live_objects);
     }
   }
+  const int sig = examples::interrupt_signal();
+  const bool interrupted = processed < frames;
+  if (interrupted)
+    std::fprintf(
+        stderr,
+        "%semfusion: %s: stopped after %zu of %zu frames; writing the outputs (a second signal stops at once)\n",
+        tty ? "\n" : "", examples::signal_name(sig), processed, frames);
 
-  // Outputs (FORMATS.md section 5).
-  write_tum_trajectory((fs::path(o.output) / "camera.txt").string(), system.camera_trajectory());
-  std::vector<ObjectListEntry> list;
+  // Outputs (FORMATS.md section 5): the trajectories are complete already.
+  streams.close();
+  const std::vector<ObjectListEntry> list = object_list(system.object_records());
+  write_object_list((out / "objects.txt").string(), list);
   std::map<int, Trajectory> est_objects;
-  for (const ObjectRecord& r : system.object_records()) {
-    if (r.person) continue;
-    list.push_back({r.id, r.class_name, r.first_timestamp, r.last_timestamp, r.deleted});
-    est_objects[r.id] = r.trajectory;
-    write_tum_trajectory((fs::path(o.output) / "objects" / (std::to_string(r.id) + ".txt")).string(), r.trajectory);
-  }
-  write_object_list((fs::path(o.output) / "objects.txt").string(), list);
+  for (const ObjectRecord& r : system.object_records())
+    if (!r.person) est_objects[r.id] = r.trajectory;
   const auto& bg = system.background();
-  write_ply((fs::path(o.output) / "meshes" / "background.ply").string(),
-            transformed(marching_cubes(bg, S(0), S(1)), bg.pose()));
+  write_ply((out / "meshes" / "background.ply").string(), transformed(marching_cubes(bg, S(0), S(1)), bg.pose()));
   for (const auto& obj : system.objects())
-    write_ply((fs::path(o.output) / "meshes" / ("object_" + std::to_string(obj->id()) + ".ply")).string(),
+    write_ply((out / "meshes" / ("object_" + std::to_string(obj->id()) + ".ply")).string(),
               transformed(marching_cubes(obj->volume(), S(0), S(1)), obj->T_object_volume()));
 
   JsonWriter json;
-  json.begin().string("input", o.input).string("backend", B::name).string("detector", in.detector);
-  json.integer("frames", (long long)frames).integer("objects_created", (long long)list.size());
-  json.begin("settings");
-  for (const auto& e : parameter_table<S>()) json.string(e.name, e.get(system.params()));
-  json.end().begin("timings_ms");
+  run_summary(json, interrupted ? "interrupted" : "finished", processed);
+  if (interrupted) {
+    json.string("signal", examples::signal_name(sig));
+    // The last frame processed: its index in the input and its timestamp.
+    json.integer("last_frame", (long long)processed - 1);
+    json.number("last_timestamp", processed > 0 ? in.timestamp(processed - 1) : NAN);
+  }
+  json.integer("objects_created", (long long)list.size());
+  settings(json);
+  json.begin("timings_ms");
   const auto stage = [&](const char* name, double StageTimes::*field) {
     std::vector<double> v;
     for (const auto& t : times) v.push_back(t.*field);
@@ -460,15 +592,19 @@ void run(const RunOptions& o) {
   for (const auto& t : times) totals.push_back(t.total);
   const auto [med, p90] = median_p90(totals);
   std::printf("%zu frames on %s: %.1f ms per frame (median), %.1f ms (90th percentile); %zu objects created\n",
-              frames, B::name, med, p90, list.size());
+              processed, B::name, med, p90, list.size());
   if (in.truth) {
     json.begin("evaluation");
     print_evaluation(system.camera_trajectory(), est_objects, *in.truth, &json);
     json.end();
   }
   json.end();
-  write_text_file((fs::path(o.output) / "run.json").string(), json.str());
-  std::printf("wrote %s\n", o.output.c_str());
+  write_text_file((out / "run.json").string(), json.str());
+  if (interrupted)
+    std::printf("wrote %s (interrupted by %s after %zu of %zu frames)\n", o.output.c_str(), examples::signal_name(sig),
+                processed, frames);
+  else
+    std::printf("wrote %s\n", o.output.c_str());
 }
 
 void evaluate(const std::string& sequence, const std::string& output) {
@@ -544,7 +680,11 @@ int main(int argc, char** argv) {
   }
   try {
     if (*run_cmd) {
+      examples::catch_interrupts();
       examples::with_backend(o.backend, [&](auto backend) { run<decltype(backend)>(o); });
+      // Stopped by a signal (even one that came after the last frame): the
+      // shell's convention, 128 + the signal's number.
+      if (const int sig = examples::interrupt_signal()) return 128 + sig;
     } else {
       evaluate(eval_sequence, eval_output);
     }

@@ -2,9 +2,12 @@
 //   <out>/camera.txt, <out>/objects.txt, <out>/objects/<id>.txt,
 //   <out>/meshes/background.ply, <out>/meshes/object_<id>.ply, <out>/run.json.
 // Every file is written atomically (a failed run never leaves a half-written
-// file under a final name); errors name the path.
+// file under a final name); errors name the path. Trajectories that grow
+// while a run goes are streamed instead (io/trajectory_stream.hpp).
 #pragma once
 
+#include <cerrno>
+#include <cstdio>
 #include <filesystem>
 #include <map>
 #include <string>
@@ -22,6 +25,7 @@ struct ObjectListEntry {
   std::string class_name;
   double first_timestamp = 0, last_timestamp = 0;
   bool deleted = false;
+  bool operator==(const ObjectListEntry&) const = default;
 };
 
 namespace detail::run_outputs {
@@ -35,6 +39,22 @@ inline void make_directory(const std::string& dir, const char* where) {
 /// Creates `dir` (and parents) or throws naming it.
 inline void create_output_directory(const std::string& dir) {
   detail::run_outputs::make_directory(dir, "create_output_directory");
+}
+
+/// Creates, writes, flushes and removes a small file in `dir`, so that a
+/// directory that exists but cannot be written (read-only, full) fails
+/// before a run spends time on frames; throws naming the probe file and
+/// the system's text otherwise.
+inline void check_writable_directory(const std::string& dir) {
+  const std::string probe = (std::filesystem::path(dir) / ".emfusion-write-test").string();
+  {
+    detail::io::AtomicFile file("check_writable_directory", probe);
+    errno = 0;
+    const bool written = std::fputs("emfusion\n", file.get()) >= 0;
+    file.commit(written ? "" : detail::io::errno_text(errno));
+  }
+  if (std::remove(probe.c_str()) != 0)
+    detail::io::fail("check_writable_directory", probe, "cannot remove: " + detail::io::errno_text(errno));
 }
 
 /// objects.txt: "id class first_timestamp last_timestamp deleted(0|1)".

@@ -257,22 +257,25 @@ inline std::vector<TumListEntry> parse_tum_list(const std::string& text, const s
   return detail::tum::parse_list(text, name, "TumSequence::open");
 }
 
-/// The text that write_tum_trajectory (below) writes for `poses`, in memory;
-/// `name` stands for the file in messages (same checks, same
-/// std::invalid_argument).
-inline std::string format_tum_trajectory(const std::vector<TimedPose>& poses, const std::string& name) {
-  namespace tum = detail::tum;
-  const std::string& path = name;
-  constexpr const char* where = "write_tum_trajectory";
-  std::string text = "# timestamp tx ty tz qx qy qz qw\n";
-  std::string previous_text;
-  double previous = 0;
-  for (std::size_t i = 0; i < poses.size(); ++i) {
+namespace detail::tum {
+
+/// The first line of every trajectory file written here.
+inline constexpr const char* trajectory_header = "# timestamp tx ty tz qx qy qz qw\n";
+
+/// Pose lines as write_tum_trajectory writes them, one call per pose. It
+/// remembers the previous timestamp as written, so that a file written
+/// whole (format_tum_trajectory) and one written pose by pose
+/// (TumTrajectoryStream) hold the same text and pass the same checks.
+class PoseLines {
+ public:
+  /// Appends `p`'s line to `text`; throws std::invalid_argument naming
+  /// `where`, `path` and the pose's index, adding nothing, if a value is not
+  /// finite or the timestamp as written is not after the previous one.
+  void append(std::string& text, const TimedPose& p, const char* where, const std::string& path) {
     const auto bad = [&](const std::string& problem) {
-      throw std::invalid_argument(std::string(where) + ": " + tum::quoted(path) + ": pose " + std::to_string(i) + ": " +
+      throw std::invalid_argument(std::string(where) + ": " + quoted(path) + ": pose " + std::to_string(count_) + ": " +
                                   problem);
     };
-    const TimedPose& p = poses[i];
     const auto& t = p.pose.translation();
     const auto q = p.pose.quaternion();
     bool finite = true;
@@ -281,25 +284,45 @@ inline std::string format_tum_trajectory(const std::vector<TimedPose>& poses, co
     if (!std::isfinite(p.timestamp)) bad("the timestamp is not finite");
     if (!finite) bad("the pose has a non-finite translation or rotation");
     std::string stamp;
-    tum::append_fixed(stamp, p.timestamp, 6);
+    append_fixed(stamp, p.timestamp, 6);
     // Compare what a reader will see: timestamps closer than the written
     // precision would read back equal.
     double written = 0;
     std::from_chars(stamp.data(), stamp.data() + stamp.size(), written);
-    if (i > 0 && !(written > previous))
-      bad("timestamp " + stamp + " is not after the previous one (" + previous_text + ") as written with 6 decimals");
-    previous = written, previous_text = stamp;
+    if (count_ > 0 && !(written > previous_))
+      bad("timestamp " + stamp + " is not after the previous one (" + previous_text_ + ") as written with 6 decimals");
+    previous_ = written, previous_text_ = stamp;
+    ++count_;
     text += stamp;
     for (int k = 0; k < 3; ++k) {
       text.push_back(' ');
-      tum::append_fixed(text, t[k], 9);
+      append_fixed(text, t[k], 9);
     }
     for (int k = 0; k < 4; ++k) {
       text.push_back(' ');
-      tum::append_fixed(text, q[k], 9);
+      append_fixed(text, q[k], 9);
     }
     text.push_back('\n');
   }
+
+  /// The number of lines appended.
+  std::size_t count() const { return count_; }
+
+ private:
+  std::size_t count_ = 0;
+  double previous_ = 0;
+  std::string previous_text_;
+};
+
+}  // namespace detail::tum
+
+/// The text that write_tum_trajectory (below) writes for `poses`, in memory;
+/// `name` stands for the file in messages (same checks, same
+/// std::invalid_argument).
+inline std::string format_tum_trajectory(const std::vector<TimedPose>& poses, const std::string& name) {
+  std::string text = detail::tum::trajectory_header;
+  detail::tum::PoseLines lines;
+  for (const TimedPose& p : poses) lines.append(text, p, "write_tum_trajectory", name);
   return text;
 }
 
