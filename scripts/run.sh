@@ -7,6 +7,7 @@
 # arguments go to `emfusion run`, e.g.
 #   bash scripts/run.sh --max-frames 60
 #   bash scripts/run.sh --input synthetic:room --output out/room   (640x480, slower)
+#   bash scripts/run.sh --backend cuda   (builds build-cuda/ with the CUDA toolkit and runs on the GPU)
 # Environment: EMFUSION_JOBS overrides the parallel build jobs (default: nproc).
 set -euo pipefail
 
@@ -14,18 +15,24 @@ source "$(dirname "${BASH_SOURCE[0]}")/cpu-build.sh"
 
 input="synthetic:room-small"
 output="out/room-small"
+backend=cpu
 args=()
 while (($#)); do
   case "$1" in
     --input) input="$2"; shift 2 ;;
     --output) output="$2"; shift 2 ;;
+    --backend) backend="$2"; shift 2 ;;
     *) args+=("$1"); shift ;;
   esac
 done
 
-cpu_build emfusion_app
+case "$backend" in
+  cpu) cpu_build emfusion_app; app=build/examples/emfusion ;;
+  cuda) cuda_build emfusion_app; app=build-cuda/examples/emfusion ;;
+  *) echo "run.sh: --backend must be cpu or cuda, got '$backend'" >&2; exit 2 ;;
+esac
 
-say "running: build/examples/emfusion run $input --output $output ${args[*]:-}"
-build/examples/emfusion run "$input" --output "$output" "${args[@]}"
+say "running: $app run $input --output $output --backend $backend ${args[*]:-}"
+"$app" run "$input" --output "$output" --backend "$backend" "${args[@]}"
 [[ $output == /* ]] || output="${repo_root}/${output}"
 say "done; results are in ${output}"

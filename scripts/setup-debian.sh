@@ -1,62 +1,115 @@
 #!/usr/bin/env bash
-# Installs the Debian 12 packages that emfusion's build, tests and demo need.
-# Idempotent and non-interactive: when every package is already installed it
-# touches nothing (no apt-get at all); otherwise it runs `apt-get update` once
-# and installs only the missing packages. Uses sudo only when not root.
+# Makes sure what a step of emfusion's build needs is there, and installs
+# only what is missing:
+#   bash scripts/setup-debian.sh [run|test|cuda]
+#     run   build the app and the examples on the CPU (scripts/run.sh)
+#     test  run: plus Catch2, and clang with libFuzzer and LLVM's OpenMP for
+#           the fuzz build (scripts/test.sh; the default)
+#     cuda  run, built with the CUDA toolkit's nvcc and its thrust
+#           (scripts/run.sh --backend cuda)
+# Each need is checked by what it is (a command on PATH, a header the
+# compiler finds, a library file), not by a package name, so tools that came
+# another way (a cmake from pip or a tarball, Eigen in /usr/local, thrust
+# with the CUDA toolkit) count. What is missing is installed with apt-get
+# (one `apt-get update`, then only the missing packages; sudo when not root)
+# on Debian and derivatives; without apt-get the script names exactly what
+# is missing and which Debian package would provide it, and fails.
 set -euo pipefail
 
-# One list, one place: add packages here (e.g. libopencv-dev for io/ and the app).
-EMFUSION_DEBIAN_PACKAGES=(
-  build-essential
-  cmake
-  libeigen3-dev
-  libthrust-dev
-  catch2
-  libfmt-dev
-  libcli11-dev
-  libomp-dev
-  zlib1g-dev
-  libpng-dev
-  libjpeg-dev
-  libopenexr-dev
-  clang
-  libclang-rt-14-dev
-)
+purpose="${1:-test}"
+case "$purpose" in
+  run | test | cuda) ;;
+  *) echo "[setup-debian] unknown step '$purpose' (run, test or cuda)" >&2; exit 2 ;;
+esac
 
 log() { echo "[setup-debian] $*"; }
 
-if ! command -v dpkg-query >/dev/null 2>&1; then
-  log "dpkg-query not found: this script is for Debian (12) and derivatives." >&2
-  exit 1
-fi
-
-missing=()
-for pkg in "${EMFUSION_DEBIAN_PACKAGES[@]}"; do
-  status="$(dpkg-query -W -f='${db:Status-Status}' "$pkg" 2>/dev/null || true)"
-  if [[ "$status" != "installed" ]]; then
-    missing+=("$pkg")
-  fi
+cuda_include=""
+for dir in "${CUDA_HOME:-}" /usr/local/cuda; do
+  [[ -n "$dir" && -d "$dir/include" ]] && { cuda_include="$dir/include"; break; }
 done
 
-if [[ ${#missing[@]} -eq 0 ]]; then
-  log "all ${#EMFUSION_DEBIAN_PACKAGES[@]} packages already installed; nothing to do."
+# A C++ header the compiler finds (with Eigen's and the CUDA toolkit's include folders).
+have_header() {
+  local flags=(-I/usr/include/eigen3 -I/usr/local/include/eigen3)
+  [[ -n "$cuda_include" ]] && flags+=("-I$cuda_include/cccl" "-I$cuda_include")
+  command -v g++ >/dev/null 2>&1 || return 1
+  # <cstdio> first: jpeglib.h uses FILE without including it.
+  printf '#include <cstdio>\n#include <%s>\n' "$1" | g++ -std=c++20 -x c++ -E "${flags[@]}" - -o /dev/null >/dev/null 2>&1
+}
+have_command() { command -v "$1" >/dev/null 2>&1; }
+# CMake 3.24 or newer (CMakePresets.json version 5).
+have_cmake() {
+  have_command cmake || return 1
+  local v
+  v="$(cmake --version | head -n 1 | sed 's/[^0-9]*\([0-9]*\)\.\([0-9]*\).*/\1 \2/')"
+  read -r major minor <<<"$v"
+  ((major > 3 || (major == 3 && minor >= 24)))
+}
+have_fuzzer_runtime() { compgen -G '/usr/lib/llvm-*/lib/clang/*/lib/linux/libclang_rt.fuzzer-x86_64.a' >/dev/null; }
+
+# need <description> <Debian package> <check command...>
+missing_packages=()
+missing_text=()
+need() {
+  local what=$1 package=$2
+  shift 2
+  if ! "$@"; then
+    missing_packages+=("$package")
+    missing_text+=("$what (Debian package $package)")
+  fi
+}
+
+need "a C++20 compiler (g++)" build-essential have_command g++
+need "CMake 3.24 or newer" cmake have_cmake
+need "Eigen 3.4 headers" libeigen3-dev have_header Eigen/Core
+need "fmt headers" libfmt-dev have_header fmt/core.h
+need "CLI11 headers" libcli11-dev have_header CLI/CLI.hpp
+need "zlib headers" zlib1g-dev have_header zlib.h
+need "libpng headers" libpng-dev have_header png.h
+need "libjpeg headers" libjpeg-dev have_header jpeglib.h
+need "OpenEXR headers" libopenexr-dev have_header OpenEXR/ImfInputFile.h
+if [[ "$purpose" == cuda ]]; then
+  # thrust comes with the toolkit; nvcc itself is not a Debian package here.
+  if ! have_command nvcc && [[ ! -x "${cuda_include%/include}/bin/nvcc" ]]; then
+    log "nvcc not found on PATH, in \$CUDA_HOME/bin or /usr/local/cuda/bin: install the CUDA toolkit (12 or newer)" >&2
+    exit 1
+  fi
+else
+  need "thrust headers" libthrust-dev have_header thrust/version.h
+fi
+if [[ "$purpose" == test ]]; then
+  need "Catch2 headers (v2 or v3)" catch2 bash -c 'printf "#include <catch2/catch.hpp>\n" | g++ -x c++ -E - -o /dev/null 2>/dev/null ||
+                                                  printf "#include <catch2/catch_all.hpp>\n" | g++ -std=c++17 -x c++ -E - -o /dev/null 2>/dev/null'
+  need "clang (the fuzz build)" clang have_command clang
+  need "LLVM's OpenMP (the fuzz build)" libomp-dev bash -c 'compgen -G "/usr/lib/llvm-*/include/omp.h" >/dev/null || compgen -G "/usr/lib/llvm-*/lib/clang/*/include/omp.h" >/dev/null'
+  need "libFuzzer's runtime (the fuzz build)" libclang-rt-14-dev have_fuzzer_runtime
+fi
+
+if [[ ${#missing_packages[@]} -eq 0 ]]; then
+  log "everything the '$purpose' step needs is there; nothing to install."
   exit 0
 fi
 
+log "missing for the '$purpose' step:"
+for text in "${missing_text[@]}"; do log "  - $text"; done
+if ! command -v apt-get >/dev/null 2>&1; then
+  log "apt-get not found: install the above by hand and run this again." >&2
+  exit 1
+fi
 as_root=()
 if [[ "$(id -u)" -ne 0 ]]; then
   if command -v sudo >/dev/null 2>&1; then
     as_root=(sudo)
   else
-    log "not root and sudo is not available; please install as root: ${missing[*]}" >&2
+    log "not root and sudo is not available; as root, run: apt-get install ${missing_packages[*]}" >&2
     exit 1
   fi
 fi
-
-export DEBIAN_FRONTEND=noninteractive
-log "missing packages: ${missing[*]}"
+# One package may provide several needs (build-essential).
+mapfile -t packages < <(printf '%s\n' "${missing_packages[@]}" | sort -u)
 log "running: ${as_root[*]:+${as_root[*]} }apt-get update"
 "${as_root[@]}" env DEBIAN_FRONTEND=noninteractive apt-get update
-log "running: ${as_root[*]:+${as_root[*]} }apt-get install -y --no-install-recommends ${missing[*]}"
-"${as_root[@]}" env DEBIAN_FRONTEND=noninteractive apt-get install -y --no-install-recommends "${missing[@]}"
+log "running: ${as_root[*]:+${as_root[*]} }apt-get install -y --no-install-recommends ${packages[*]}"
+"${as_root[@]}" env DEBIAN_FRONTEND=noninteractive apt-get install -y --no-install-recommends "${packages[@]}"
 log "done."

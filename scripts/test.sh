@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # The project's test command (README; CI runs exactly this via .ci/run):
-#   1. installs the Debian packages (scripts/setup-debian.sh; no-op when present),
+#   1. installs what is missing (scripts/setup-debian.sh test; no-op when all is there),
 #   2. configures, builds and tests the CPU-only build in build/ (preset
 #      release; every ctest entry but the label integration),
 #   3. builds the same (benchmarks aside) under AddressSanitizer + UBSan in
@@ -29,8 +29,8 @@ export OMP_WAIT_POLICY=passive
 started=$SECONDS
 say() { printf '==> [test.sh %3dm%02ds] %s\n' $(((SECONDS - started) / 60)) $(((SECONDS - started) % 60)) "$*"; }
 
-say "installing dependencies (scripts/setup-debian.sh)"
-bash scripts/setup-debian.sh
+say "checking dependencies (scripts/setup-debian.sh test: installs only what is missing)"
+bash scripts/setup-debian.sh test
 
 say "CPU build: configuring build/ (preset release)"
 cmake --preset release
