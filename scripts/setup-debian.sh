@@ -3,8 +3,9 @@
 # only what is missing:
 #   bash scripts/setup-debian.sh [run|test|cuda]
 #     run   build the app and the examples on the CPU (scripts/run.sh)
-#     test  run: plus Catch2, and clang with libFuzzer and LLVM's OpenMP for
-#           the fuzz build (scripts/test.sh; the default)
+#     test  run: plus OpenEXR (optional elsewhere), Catch2, and clang with
+#           libFuzzer and LLVM's OpenMP for the fuzz build (scripts/test.sh;
+#           the default)
 #     cuda  run, built with the CUDA toolkit's nvcc and its thrust
 #           (scripts/run.sh --backend cuda)
 # Each need is checked by what it is (a command on PATH, a header the
@@ -68,7 +69,13 @@ need "CLI11 headers" libcli11-dev have_header CLI/CLI.hpp
 need "zlib headers" zlib1g-dev have_header zlib.h
 need "libpng headers" libpng-dev have_header png.h
 need "libjpeg headers" libjpeg-dev have_header jpeglib.h
-need "OpenEXR headers" libopenexr-dev have_header OpenEXR/ImfInputFile.h
+# OpenEXR is optional for building (without it, reading .exr depth fails
+# with an error saying so); the tests want it, to test that reader.
+if [[ "$purpose" == test ]]; then
+  need "OpenEXR headers" libopenexr-dev have_header OpenEXR/ImfInputFile.h
+elif ! have_header OpenEXR/ImfInputFile.h; then
+  log "note: no OpenEXR headers (Debian libopenexr-dev): the build will not read .exr depth (Co-Fusion folders)"
+fi
 if [[ "$purpose" == cuda ]]; then
   # thrust comes with the toolkit; nvcc itself is not a Debian package here.
   if ! have_command nvcc && [[ ! -x "${cuda_include%/include}/bin/nvcc" ]]; then
