@@ -31,7 +31,9 @@
 #include <algorithm>
 #include <cctype>
 #include <chrono>
+#include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <filesystem>
 #include <functional>
 #include <map>
@@ -497,7 +499,9 @@ void run(const RunOptions& o) {
   StreamedOutputs streams(o.output);
 
   std::vector<StageTimes> times;
-  const bool tty = isatty(fileno(stderr));
+  // One updating progress line on a terminal; plain lines on a pipe and in
+  // CI (which may run the app on a pseudo-terminal).
+  const bool tty = isatty(fileno(stderr)) && std::getenv("CI") == nullptr;
   const auto start = std::chrono::steady_clock::now();
   std::size_t processed = 0;
   // A signal stops the loop between frames; the outputs below are then
@@ -533,8 +537,10 @@ void run(const RunOptions& o) {
     const double fps = double(i + 1) / elapsed;
     if (tty) {
       const int width = 30, done = int(width * double(i + 1) / double(frames));
-      std::fprintf(stderr, "\r[%s%s] %zu/%zu  %.1f fps  %d objects ", std::string(std::size_t(done), '#').c_str(),
-                   std::string(std::size_t(width - done), '.').c_str(), i + 1, frames, fps, r.live_objects);
+      const long left = std::lround(double(frames - i - 1) / fps);
+      std::fprintf(stderr, "\r[%s%s] %zu/%zu  %.1f fps  %ld:%02ld left  %d objects ",
+                   std::string(std::size_t(done), '#').c_str(), std::string(std::size_t(width - done), '.').c_str(),
+                   i + 1, frames, fps, left / 60, left % 60, r.live_objects);
       if (i + 1 == frames) std::fprintf(stderr, "\n");
     } else if ((i + 1) % 30 == 0 || i + 1 == frames) {
       std::fprintf(stderr, "frame %zu/%zu: %.1f fps, %d objects\n", i + 1, frames, fps, r.live_objects);
