@@ -14,6 +14,8 @@ Steps (subcommands):
             python3-numpy python3-scipy python3-opencv; installed with apt-get when missing and
             root); also writes <seq>/bench_labels.json, the per-frame label areas and detections
             the report needs, so that run and report need numpy only
+  export    copy generated sequences without colour and ground-truth masks (--to DIR), for a
+            machine that cannot generate (run and report there with --work DIR)
   run       run the app on each generated sequence (always re-runs)
   report    score the runs and print the table and the summary (numpy only)
   all       generate, run, report
@@ -246,6 +248,42 @@ def generate(args, seqs):
                                seconds=round(time.time() - t0, 1)), f, indent=1)
             log('[generate] %s: %.0f s' % (s['name'], time.time() - t0))
         write_labels_summary(out)
+
+
+# ----------------------------------------------------------------------------- export
+
+# What run and report read from a generated sequence: no rgb/ (the app tracks on depth and reads
+# a sequence without colour) and no masks_gt/ (bench_labels.json holds what the report needs).
+EXPORT_FILES = ['depth.txt', 'calibration.txt', 'groundtruth.txt', 'dyngen.json', 'bench_labels.json',
+                'bench_params.json', 'README.txt']
+EXPORT_DIRS = ['depth', 'masks', 'groundtruth_objects']
+
+
+def export(args, seqs):
+    """Copies the generated sequences, without colour and ground-truth masks, to --to DIR in the
+    layout of --work, for a machine that cannot generate: there run `run --work DIR` and `report
+    --work DIR`."""
+    import shutil
+    if not args.to:
+        raise SystemExit('export needs --to DIR')
+    total = 0
+    for s in seqs:
+        src = seq_dir(args.work, s)
+        if not os.path.isfile(os.path.join(src, 'bench_labels.json')):
+            raise SystemExit('[export] %s is not generated (run the generate step)' % s['name'])
+        dst = seq_dir(os.path.abspath(args.to), s)
+        if os.path.isdir(dst):
+            shutil.rmtree(dst)
+        os.makedirs(dst)
+        for f in EXPORT_FILES:
+            if os.path.isfile(os.path.join(src, f)):
+                shutil.copyfile(os.path.join(src, f), os.path.join(dst, f))
+        for d in EXPORT_DIRS:
+            shutil.copytree(os.path.join(src, d), os.path.join(dst, d))
+        size = sum(os.path.getsize(os.path.join(r, f)) for r, _, fs in os.walk(dst) for f in fs)
+        total += size
+        log('[export] %s: %.1f MiB -> %s' % (s['name'], size / 2 ** 20, dst))
+    log('[export] %.1f MiB in all' % (total / 2 ** 20))
 
 
 # ----------------------------------------------------------------------------- run
@@ -565,15 +603,17 @@ def fmt(v, spec, none='-'):
 
 
 def report(args, seqs):
-    rows, results = [], {}
+    rows, results, unscored = [], {}, []
     for s in seqs:
         seq, out = seq_dir(args.work, s), run_dir(args.work, s, args.backend)
         rj = os.path.join(out, 'bench_run.json')
         if not os.path.isfile(os.path.join(seq, 'bench_labels.json')):
             log('[report] %s: not generated' % s['name'])
+            unscored.append(s['name'])
             continue
         if not os.path.isfile(rj):
             log('[report] %s: no run for backend %s' % (s['name'], args.backend))
+            unscored.append(s['name'])
             continue
         run_info = json.load(open(rj))
         if run_info['rc'] != 0 or not os.path.isfile(os.path.join(out, 'camera.txt')):
@@ -644,7 +684,10 @@ def report(args, seqs):
         print('  %-4s %-82s %d/%d%s' % (verdict, text, ok, tot, ('  failing: ' + ', '.join(bad)) if bad else ''))
     nf = sum(res.get('false_objects', 0) for res in results.values())
     print('  info false objects (estimates matched to no mover): %d' % nf)
-    print('  overall: %s' % ('PASS' if all_pass and results else 'FAIL'))
+    if unscored:
+        print('  not scored (no sequence or no run): %s' % ', '.join(unscored))
+    print('  overall: %s%s' % ('PASS' if all_pass and results else 'FAIL',
+                               ' (on the %d scored sequences only)' % len(results) if unscored else ''))
     if args.json:
         with open(args.json, 'w') as f:
             json.dump(results, f, indent=1, default=lambda o: sorted(o) if isinstance(o, set) else str(o))
@@ -773,7 +816,7 @@ def selftest():
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument('step', choices=['list', 'generate', 'run', 'report', 'all', 'selftest'])
+    ap.add_argument('step', choices=['list', 'generate', 'export', 'run', 'report', 'all', 'selftest'])
     ap.add_argument('--work', default=os.path.join(HERE, 'out'),
                     help='folder for sequences and runs (default bench/out, git-ignored)')
     ap.add_argument('--app', default=os.path.join(REPO, 'build', 'examples', 'emfusion'),
@@ -784,6 +827,7 @@ def main():
                     help="processes for the generator's rendering (default: the cores, at most 16)")
     ap.add_argument('--only', default=None, help='comma-separated sequence names (of the full or quick list)')
     ap.add_argument('--quick', action='store_true', help='the two short validation sequences only')
+    ap.add_argument('--to', default=None, help='export: the folder to copy the sequences to')
     ap.add_argument('--markdown', action='store_true', help='print the table as markdown')
     ap.add_argument('--json', default=None, help='also write the scored results to this file')
     ap.add_argument('--app-arg', dest='app_args', action='append', default=[],
@@ -810,6 +854,8 @@ def main():
         return 0
     if args.step in ('generate', 'all'):
         generate(args, seqs)
+    if args.step == 'export':
+        export(args, seqs)
     if args.step in ('run', 'all'):
         run(args, seqs)
     if args.step in ('report', 'all'):
