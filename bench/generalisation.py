@@ -91,10 +91,12 @@ SEQUENCES = [
       p_miss=0.2, p_fp=0.1),
 ]
 
-# --quick: two short sequences that check the whole pipeline in minutes on a CPU.
+# --quick: short sequences that check the whole pipeline in minutes on a CPU (the third one
+# around the turn of a there-and-back base).
 QUICK = [
     S('q-synthetic90', 90, 301, 'car:toy_car,cup:mug', det_every=15),
     C('q-composite90', '0:90', 302, 'car:toy_car,book:box', det_every=15),
+    C('q-tab-turn90', '255:345', 303, 'cup:mug,book:round_box', base='tab600', det_every=15),
 ]
 
 
@@ -134,8 +136,7 @@ def dyngen_command(s, out, base, jobs):
 
 def ensure_generator_packages():
     """numpy, scipy and cv2 for /usr/bin/python3 (Debian packages, installed when root)."""
-    probe = [sys.executable if sys.executable.startswith('/usr/bin/') else '/usr/bin/python3', '-c',
-             'import numpy, scipy, cv2']
+    probe = ['/usr/bin/python3', '-c', 'import numpy, scipy, cv2']   # the interpreter dyngen runs with
     if subprocess.run(probe, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL).returncode == 0:
         return
     if os.geteuid() != 0:
@@ -247,7 +248,18 @@ def generate(args, seqs):
                 json.dump(dict(params=seq_params(s), name=s['name'], command=cmd,
                                seconds=round(time.time() - t0, 1)), f, indent=1)
             log('[generate] %s: %.0f s' % (s['name'], time.time() - t0))
-        write_labels_summary(out)
+        labels_summary(out)
+
+
+def labels_summary(seq):
+    """write_labels_summary here, or through /usr/bin/python3 where this interpreter has no cv2."""
+    try:
+        import cv2  # noqa: F401
+        import numpy  # noqa: F401
+    except ImportError:
+        subprocess.run(['/usr/bin/python3', os.path.abspath(__file__), '_labels', seq], check=True)
+        return
+    write_labels_summary(seq)
 
 
 # ----------------------------------------------------------------------------- export
@@ -815,6 +827,9 @@ def selftest():
 # ----------------------------------------------------------------------------- main
 
 def main():
+    if len(sys.argv) == 3 and sys.argv[1] == '_labels':   # internal: labels_summary through /usr/bin/python3
+        write_labels_summary(sys.argv[2])
+        return 0
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument('step', choices=['list', 'generate', 'export', 'run', 'report', 'all', 'selftest'])
     ap.add_argument('--work', default=os.path.join(HERE, 'out'),
