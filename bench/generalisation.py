@@ -610,6 +610,20 @@ def judge_object(r, kind):
         coverage=r['coverage'] is not None and r['coverage'] >= COVERAGE_MIN)
 
 
+def shown_value(c, r):
+    """The number behind an object criterion, for the summary's list of failures."""
+    if c == 'lost':
+        return 'never created' if r['created'] is None else '%.2f s' % r['lost_s']
+    if c == 'dup':
+        return '%d fragments, %d duplicate frames' % (r['fragments'], r['duplicate_frames'])
+    if c == 'create':
+        return 'never created' if r['creation_delay'] is None else \
+            'delay %d > %d frames' % (r['creation_delay'], r['creation_allowed'])
+    if c == 'obj_ate':
+        return 'no ATE' if r['ate'] is None else '%.2f cm' % (100 * r['ate'])
+    return '%.0f %%' % (100 * r['coverage'])
+
+
 def fmt(v, spec, none='-'):
     return none if v is None else spec % v
 
@@ -690,10 +704,10 @@ def report(args, seqs):
                 tot += 1
                 ok += bool(v)
                 if not v:
-                    bad.append('%s/%s' % (name, r['name']))
+                    bad.append('%s/%s (%s)' % (name, r['name'], shown_value(c, r)))
         verdict = 'PASS' if tot and ok == tot else ('FAIL' if tot else 'n/a')
         all_pass &= verdict != 'FAIL'
-        print('  %-4s %-82s %d/%d%s' % (verdict, text, ok, tot, ('  failing: ' + ', '.join(bad)) if bad else ''))
+        print('  %-4s %-82s %d/%d%s' % (verdict, text, ok, tot, ('  failing: ' + '; '.join(bad)) if bad else ''))
     nf = sum(res.get('false_objects', 0) for res in results.values())
     print('  info false objects (estimates matched to no mover): %d' % nf)
     if unscored:
