@@ -881,8 +881,11 @@ def main():
     if args.step == 'list':
         for s in seqs:
             base = base_dir(args.work, s['base']) if s['kind'] == 'composite' else None
-            print('%-22s %-9s %s' % (s['name'], s['kind'], ' '.join(
-                shlex.quote(c) for c in dyngen_command(s, seq_dir(args.work, s), base, args.gen_jobs))))
+            d = seq_dir(args.work, s)
+            state = 'generated' if os.path.isfile(os.path.join(d, 'bench_labels.json')) else 'missing'
+            runs = [b for b in ('cpu', 'cuda') if os.path.isfile(os.path.join(run_dir(args.work, s, b), 'bench_run.json'))]
+            print('%-20s %-9s %-9s runs: %-8s %s' % (s['name'], s['kind'], state, ','.join(runs) or '-', ' '.join(
+                shlex.quote(c) for c in dyngen_command(s, d, base, args.gen_jobs))))
         return 0
     if args.step in ('generate', 'all'):
         generate(args, seqs)
