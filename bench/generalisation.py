@@ -1,0 +1,902 @@
+#!/usr/bin/env python3
+"""Generalisation benchmark: many generated dynamic sequences through the emfusion app.
+
+Generates dynamic RGB-D sequences with the shared generator (shared/tools/dyngen.py): fully
+synthetic rooms and composites on redkitchen_300 (also 'there and back' ones, see
+bench/there_and_back.py), with other seeds, object mixes, speeds up to the generator's limits,
+missed and false detections. Runs the app on each, then scores the runs against the ground
+truth and prints a table and a PASS/FAIL summary per target. docs/benchmarks.md has the
+commands, the sequence list and the metric definitions.
+
+Steps (subcommands):
+  list      the sequences (name, kind, generator command)
+  generate  make the sequences that are missing (needs numpy, scipy, opencv: Debian's
+            python3-numpy python3-scipy python3-opencv; installed with apt-get when missing and
+            root); also writes <seq>/bench_labels.json, the per-frame label areas and detections
+            the report needs, so that run and report need numpy only
+  export    copy generated sequences without colour and ground-truth masks (--to DIR), for a
+            machine that cannot generate (run and report there with --work DIR)
+  run       run the app on each generated sequence (always re-runs)
+  report    score the runs and print the table and the summary (numpy only)
+  all       generate, run, report
+  selftest  check the metric code on small hand-made cases
+
+Examples:
+  /usr/bin/python3 bench/generalisation.py all --backend cuda --jobs 2
+  /usr/bin/python3 bench/generalisation.py all --quick --backend cpu
+  python3 bench/generalisation.py report --only s201,s202
+"""
+
+import argparse
+import concurrent.futures
+import hashlib
+import json
+import os
+import shlex
+import subprocess
+import sys
+import time
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+REPO = os.path.dirname(HERE)
+SHARED = os.path.normpath(os.path.join(REPO, '..', 'shared'))
+DYNGEN = os.path.join(SHARED, 'tools', 'dyngen.py')
+KITCHEN = os.path.join(SHARED, 'data', 'redkitchen_300')
+
+# The paper's visibility rule: at least 40x40 pixels of the object's ground-truth mask inside
+# the image less a 20-pixel border.
+BORDER = 20
+MIN_AREA = 40 * 40
+MAX_DIFF = 0.02        # s, timestamp association tolerance (as the app's eval)
+MATCH_DISTANCE = 0.25  # m, as eval/object_matching.hpp
+LOST_LIMIT_S = 1.0
+COVERAGE_MIN = 0.90
+OBJ_ATE_MAX = {'synthetic': 0.01, 'composite': 0.02}
+CAM_ATE_MAX = {'synthetic': 0.005}
+
+# 'fast' objects: 1 s moves at the largest length and angle the generator allows for them; their
+# peaks reach about 0.42 m/s and 80 deg/s (measured on c213-fast), the most its planner makes
+# under its limits of 0.5 m/s and 90 deg/s (it caps lengths and angles at 90 % of them).
+FAST = 'move=30:angle=60'
+
+
+def S(name, frames, seed, objects, **kw):
+    d = dict(name=name, kind='synthetic', frames=frames, seed=seed, objects=objects)
+    d.update(kw)
+    return d
+
+
+def C(name, frames, seed, objects, base='redkitchen_300', **kw):
+    d = dict(name=name, kind='composite', frames=frames, seed=seed, objects=objects, base=base)
+    d.update(kw)
+    return d
+
+
+# The benchmark's sequences. frames: synthetic N; composite 'A:B' of the base (a there-and-back
+# base 'tab600'/'tab900' is made by there_and_back.py from redkitchen_300).
+SEQUENCES = [
+    S('s201', 300, 201, 'cup:mug,car:toy_car,book:box,bottle:cylinder'),
+    S('s202', 300, 202, 'donut:torus,teddy_bear:sphere,car:toy_car,cup:mug'),
+    S('s203', 300, 203, 'bottle:capsule,sports_ball:sphere,book:round_box,car:toy_car'),
+    S('s204-fast', 300, 204, ','.join('%s:%s' % (c, FAST) for c in
+                                      ('car:toy_car', 'cup:mug', 'sports_ball:sphere'))),
+    S('s205-noisy-detector', 300, 205, 'car:toy_car,cup:mug,book:box', p_miss=0.3, p_fp=0.3),
+    S('s206-two-small', 300, 206, 'cup:mug:size=0.8,bottle:cylinder:size=0.8'),
+    S('s207-long600', 600, 207, 'car:toy_car,cup:mug,teddy_bear:sphere,book:round_box'),
+    S('s208-long900-fast', 900, 208, 'car:toy_car:%s,cup:mug,sports_ball:sphere:%s' % (FAST, FAST),
+      p_miss=0.2, p_fp=0.1),
+    C('c211', '0:300', 211, 'car:toy_car,cup:mug,book:box'),
+    C('c212-noisy-detector', '0:300', 212, 'teddy_bear:sphere,bottle:cylinder,sports_ball:sphere',
+      p_miss=0.3, p_fp=0.3),
+    C('c213-fast', '0:300', 213, ','.join('%s:%s' % (c, FAST) for c in ('car:toy_car', 'cup:mug'))),
+    C('c214-tab600', '0:600', 214, 'car:toy_car,cup:mug,book:round_box', base='tab600'),
+    C('c215-tab900', '0:900', 215, 'teddy_bear:sphere,car:toy_car,bottle:capsule', base='tab900',
+      p_miss=0.2, p_fp=0.1),
+]
+
+# --quick: short sequences that check the whole pipeline in minutes on a CPU (the third one
+# around the turn of a there-and-back base).
+QUICK = [
+    S('q-synthetic90', 90, 301, 'car:toy_car,cup:mug', det_every=15),
+    C('q-composite90', '0:90', 302, 'car:toy_car,book:box', det_every=15),
+    C('q-tab-turn90', '255:345', 303, 'cup:mug,book:round_box', base='tab600', det_every=15),
+]
+
+
+# ----------------------------------------------------------------------------- small helpers
+
+def log(*a):
+    print(*a, flush=True)
+
+
+def seq_params(s):
+    """Everything that decides the generated frames (the cache key)."""
+    return dict(kind=s['kind'], frames=s['frames'], seed=s['seed'], objects=s['objects'],
+                base=s.get('base'), det_every=s.get('det_every', 30), p_miss=s.get('p_miss', 0.1),
+                p_fp=s.get('p_fp', 0.05))
+
+
+def seq_dir(work, s):
+    key = hashlib.sha1(json.dumps(seq_params(s), sort_keys=True).encode()).hexdigest()[:8]
+    return os.path.join(work, 'seq', '%s-%s' % (s['name'], key))
+
+
+def base_dir(work, base):
+    if base == 'redkitchen_300':
+        return KITCHEN
+    return os.path.join(work, 'base', base)
+
+
+def dyngen_command(s, out, base, jobs):
+    p = seq_params(s)
+    cmd = ['/usr/bin/python3', DYNGEN, p['kind'], '--out', out, '--frames', str(p['frames']),
+           '--objects', p['objects'], '--seed', str(p['seed']), '--det-every', str(p['det_every']),
+           '--p-miss', str(p['p_miss']), '--p-fp', str(p['p_fp']), '--jobs', str(jobs), '--no-preview']
+    if p['kind'] == 'composite':
+        cmd[3:3] = ['--base', base]
+    return cmd
+
+
+def ensure_generator_packages():
+    """numpy, scipy and cv2 for /usr/bin/python3 (Debian packages, installed when root)."""
+    probe = ['/usr/bin/python3', '-c', 'import numpy, scipy, cv2']   # the interpreter dyngen runs with
+    if subprocess.run(probe, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL).returncode == 0:
+        return
+    if os.geteuid() != 0:
+        raise SystemExit('generate needs python3-numpy python3-scipy python3-opencv for /usr/bin/python3; '
+                         'install them as root (apt-get install ...)')
+    log('installing python3-numpy python3-scipy python3-opencv with apt-get')
+    subprocess.run(['apt-get', 'update', '-q'], check=True)
+    subprocess.run(['apt-get', 'install', '-y', '-q', 'python3-numpy', 'python3-scipy', 'python3-opencv'],
+                   check=True, env=dict(os.environ, DEBIAN_FRONTEND='noninteractive'))
+
+
+# ----------------------------------------------------------------------------- ground-truth labels
+
+def read_list(path):
+    rows = []
+    with open(path) as f:
+        for line in f:
+            line = line.strip()
+            if line and not line.startswith('#'):
+                rows.append(line.split())
+    return rows
+
+
+def inner_area(labels, k, border=BORDER):
+    """Pixels of label k inside the image less a `border`-pixel border."""
+    return int((labels[border:labels.shape[0] - border, border:labels.shape[1] - border] == k).sum())
+
+
+def detected_labels(det, gt, ids):
+    """Ground-truth labels that detector instances `ids` of image `det` stand for: an instance is
+    object k when at least half of its pixels lie on k's ground-truth mask."""
+    import numpy as np
+    out = set()
+    for i in ids:
+        m = det == i
+        n = int(m.sum())
+        if n == 0:
+            continue
+        counts = np.bincount(gt[m].ravel(), minlength=256)
+        counts[0] = 0
+        k = int(counts.argmax())
+        if k > 0 and counts[k] >= 0.5 * n:
+            out.add(k)
+    return sorted(out)
+
+
+def write_labels_summary(seq):
+    """<seq>/bench_labels.json: per frame and object the ground-truth mask area (whole image
+    and inside the 20-pixel border) and, on detector frames, which objects the simulated
+    detector reported. Needs cv2; the report then needs numpy only."""
+    import cv2
+    import numpy as np
+    info = json.load(open(os.path.join(seq, 'dyngen.json')))
+    names = [o['name'] for o in info['objects']]
+    gt_rows = read_list(os.path.join(seq, 'masks_gt', 'masks.txt'))
+    det_rows = {r[0]: r for r in read_list(os.path.join(seq, 'masks', 'masks.txt'))}
+    frames = []
+    for r in gt_rows:
+        lab = cv2.imread(os.path.join(seq, 'masks_gt', r[1]), cv2.IMREAD_UNCHANGED)
+        area = [int((lab == k).sum()) for k in range(1, len(names) + 1)]
+        inner = [inner_area(lab, k) for k in range(1, len(names) + 1)]
+        fr = dict(t=r[0], area=area, inner=inner)
+        if r[0] in det_rows:
+            d = det_rows[r[0]]
+            det = cv2.imread(os.path.join(seq, 'masks', d[1]), cv2.IMREAD_UNCHANGED)
+            ids = [int(e.split(':')[0]) for e in d[2:]]
+            fr['detected'] = detected_labels(det, lab, ids)
+            fr['detections'] = len(ids)
+        frames.append(fr)
+    out = dict(border=BORDER, objects=names, det_every=info['det_every'], frames=frames)
+    tmp = os.path.join(seq, 'bench_labels.json.tmp')
+    with open(tmp, 'w') as f:
+        json.dump(out, f, separators=(',', ':'))
+    os.replace(tmp, os.path.join(seq, 'bench_labels.json'))
+
+
+# ----------------------------------------------------------------------------- generate
+
+def generate(args, seqs):
+    ensure_generator_packages()
+    for s in seqs:
+        out = seq_dir(args.work, s)
+        done = os.path.isfile(os.path.join(out, 'bench_params.json'))
+        if done and os.path.isfile(os.path.join(out, 'bench_labels.json')):
+            log('[generate] %s: cached in %s' % (s['name'], out))
+            continue
+        if not done:
+            base = None
+            if s['kind'] == 'composite':
+                base = base_dir(args.work, s['base'])
+                if s['base'] != 'redkitchen_300' and not os.path.isfile(os.path.join(base, 'groundtruth.txt')):
+                    n = int(s['base'][3:])
+                    cmd = ['/usr/bin/python3', os.path.join(HERE, 'there_and_back.py'), '--base', KITCHEN,
+                           '--frames', str(n), '--out', base]
+                    log('[generate] ' + ' '.join(shlex.quote(c) for c in cmd))
+                    subprocess.run(cmd, check=True)
+            if os.path.isdir(out):
+                subprocess.run(['rm', '-rf', '--', out], check=True)   # a half-written earlier try
+            os.makedirs(out)
+            cmd = dyngen_command(s, out, base, args.gen_jobs)
+            log('[generate] %s: %s' % (s['name'], ' '.join(shlex.quote(c) for c in cmd)))
+            t0 = time.time()
+            with open(os.path.join(out, 'bench_generate.log'), 'w') as lf:
+                r = subprocess.run(cmd, stdout=lf, stderr=subprocess.STDOUT)
+            if r.returncode != 0:
+                raise SystemExit('[generate] %s failed (rc %d), see %s' % (
+                    s['name'], r.returncode, os.path.join(out, 'bench_generate.log')))
+            with open(os.path.join(out, 'bench_params.json'), 'w') as f:
+                json.dump(dict(params=seq_params(s), name=s['name'], command=cmd,
+                               seconds=round(time.time() - t0, 1)), f, indent=1)
+            log('[generate] %s: %.0f s' % (s['name'], time.time() - t0))
+        labels_summary(out)
+
+
+def labels_summary(seq):
+    """write_labels_summary here, or through /usr/bin/python3 where this interpreter has no cv2."""
+    try:
+        import cv2  # noqa: F401
+        import numpy  # noqa: F401
+    except ImportError:
+        subprocess.run(['/usr/bin/python3', os.path.abspath(__file__), '_labels', seq], check=True)
+        return
+    write_labels_summary(seq)
+
+
+# ----------------------------------------------------------------------------- export
+
+# What run and report read from a generated sequence: no rgb/ (the app tracks on depth and reads
+# a sequence without colour) and no masks_gt/ (bench_labels.json holds what the report needs).
+EXPORT_FILES = ['depth.txt', 'calibration.txt', 'groundtruth.txt', 'dyngen.json', 'bench_labels.json',
+                'bench_params.json', 'README.txt']
+EXPORT_DIRS = ['depth', 'masks', 'groundtruth_objects']
+
+
+def export(args, seqs):
+    """Copies the generated sequences, without colour and ground-truth masks, to --to DIR in the
+    layout of --work, for a machine that cannot generate: there run `run --work DIR` and `report
+    --work DIR`."""
+    import shutil
+    if not args.to:
+        raise SystemExit('export needs --to DIR')
+    total = 0
+    for s in seqs:
+        src = seq_dir(args.work, s)
+        if not os.path.isfile(os.path.join(src, 'bench_labels.json')):
+            raise SystemExit('[export] %s is not generated (run the generate step)' % s['name'])
+        dst = seq_dir(os.path.abspath(args.to), s)
+        if os.path.isdir(dst):
+            shutil.rmtree(dst)
+        os.makedirs(dst)
+        for f in EXPORT_FILES:
+            if os.path.isfile(os.path.join(src, f)):
+                shutil.copyfile(os.path.join(src, f), os.path.join(dst, f))
+        for d in EXPORT_DIRS:
+            shutil.copytree(os.path.join(src, d), os.path.join(dst, d))
+        size = sum(os.path.getsize(os.path.join(r, f)) for r, _, fs in os.walk(dst) for f in fs)
+        total += size
+        log('[export] %s: %.1f MiB -> %s' % (s['name'], size / 2 ** 20, dst))
+    log('[export] %.1f MiB in all' % (total / 2 ** 20))
+
+
+# ----------------------------------------------------------------------------- run
+
+def run_dir(work, s, backend):
+    return os.path.join(work, 'runs', backend, os.path.basename(seq_dir(work, s)))
+
+
+def run_one(args, s):
+    seq = seq_dir(args.work, s)
+    out = run_dir(args.work, s, args.backend)
+    if not os.path.isfile(os.path.join(seq, 'bench_params.json')):
+        return s['name'], 'not generated (run the generate step)', 0.0
+    if os.path.isdir(out):
+        subprocess.run(['rm', '-rf', '--', out], check=True)
+    os.makedirs(out)
+    cmd = [args.app, 'run', seq, '--output', out, '--backend', args.backend, '--verbose'] + args.app_args
+    env = dict(os.environ)
+    env.setdefault('OMP_WAIT_POLICY', 'passive')
+    t0 = time.time()
+    with open(os.path.join(out, 'bench_run.log'), 'w') as lf:
+        lf.write(' '.join(shlex.quote(c) for c in cmd) + '\n')
+        lf.flush()
+        r = subprocess.run(cmd, stdout=lf, stderr=subprocess.STDOUT, env=env)
+    dt = time.time() - t0
+    with open(os.path.join(out, 'bench_run.json'), 'w') as f:
+        json.dump(dict(command=cmd, rc=r.returncode, seconds=round(dt, 1)), f, indent=1)
+    return s['name'], ('ok' if r.returncode == 0 else 'failed rc %d, see %s/bench_run.log' % (r.returncode, out)), dt
+
+
+def run(args, seqs):
+    if not os.path.isfile(args.app):
+        raise SystemExit('app not found: %s (build it: cmake --build --preset release --target emfusion_app, '
+                         'or pass --app)' % args.app)
+    with concurrent.futures.ThreadPoolExecutor(max_workers=max(1, args.jobs)) as pool:
+        futs = [pool.submit(run_one, args, s) for s in seqs]
+        for fu in concurrent.futures.as_completed(futs):
+            name, status, dt = fu.result()
+            log('[run] %s: %s (%.0f s)' % (name, status, dt))
+
+
+# ----------------------------------------------------------------------------- metrics (numpy only)
+
+def quat_to_matrix(q):
+    import numpy as np
+    x, y, z, w = q / np.linalg.norm(q)
+    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+                     [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+                     [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
+
+
+def read_tum(path):
+    """(timestamps (n,), poses (n,4,4)) of a TUM trajectory, body-to-world."""
+    import numpy as np
+    rows = read_list(path)
+    t = np.array([float(r[0]) for r in rows])
+    T = np.tile(np.eye(4), (len(rows), 1, 1))
+    for i, r in enumerate(rows):
+        v = [float(x) for x in r[1:8]]
+        T[i, :3, :3] = quat_to_matrix(np.array(v[3:7]))
+        T[i, :3, 3] = v[:3]
+    return t, T
+
+
+def associate(t_est, t_gt, max_difference=MAX_DIFF):
+    """TUM associate.py as eval/trajectory.hpp: every pair at most max_difference apart is a
+    candidate, taken greedily by smallest difference, each pose once; sorted by estimate time."""
+    import numpy as np
+    order = np.argsort(t_gt, kind='stable')
+    tg = np.asarray(t_gt)[order]
+    cands = []
+    for e, t in enumerate(t_est):
+        lo = int(np.searchsorted(tg, t - max_difference, 'left'))
+        hi = int(np.searchsorted(tg, t + max_difference, 'right'))
+        for j in range(lo, hi):
+            d = abs(tg[j] - t)
+            if d <= max_difference:
+                g = int(order[j])
+                cands.append((d, t, t_gt[g], e, g))
+    cands.sort()
+    used_e, used_g, out = set(), set(), []
+    for d, _, _, e, g in cands:
+        if e in used_e or g in used_g:
+            continue
+        used_e.add(e)
+        used_g.add(g)
+        out.append((e, g))
+    out.sort(key=lambda m: (t_est[m[0]], m[0]))
+    return out
+
+
+def nearest(t_sorted, t):
+    """Index into the sorted array of the value nearest t (the earlier on a tie)."""
+    import numpy as np
+    j = int(np.searchsorted(t_sorted, t, 'left'))
+    if j == len(t_sorted):
+        return j - 1
+    if j == 0:
+        return 0
+    return j - 1 if t - t_sorted[j - 1] <= t_sorted[j] - t else j
+
+
+def camera_at(cam, t):
+    """Index of the camera pose nearest t within MAX_DIFF, else None (cam: sorted (t, T))."""
+    if len(cam[0]) == 0:
+        return None
+    k = nearest(cam[0], t)
+    return k if abs(cam[0][k] - t) <= MAX_DIFF else None
+
+
+def align_rigid(src, tgt):
+    """R, t minimising sum |R src_i + t - tgt_i|^2 (Umeyama/Horn without scale, proper rotation)."""
+    import numpy as np
+    src, tgt = np.asarray(src, float), np.asarray(tgt, float)
+    ms, mt = src.mean(0), tgt.mean(0)
+    H = (tgt - mt).T @ (src - ms)
+    U, _, Vt = np.linalg.svd(H)
+    D = np.eye(3)
+    D[2, 2] = 1.0 if np.linalg.det(U @ Vt) >= 0 else -1.0
+    R = U @ D @ Vt
+    return R, mt - R @ ms
+
+
+def ate_rmse(est_pos, gt_pos):
+    import numpy as np
+    R, t = align_rigid(est_pos, gt_pos)
+    e = np.linalg.norm(np.asarray(est_pos) @ R.T + t - np.asarray(gt_pos), axis=1)
+    return float(np.sqrt(np.mean(e ** 2)))
+
+
+def camera_ate(est_cam, gt_cam):
+    m = associate(est_cam[0], gt_cam[0])
+    if len(m) < 3:
+        return None
+    return ate_rmse([est_cam[1][e][:3, 3] for e, _ in m], [gt_cam[1][g][:3, 3] for _, g in m])
+
+
+def origin_distance(est_cam, gt_cam, est_obj, gt_obj):
+    """Mean camera-frame distance of the two object origins over their common frames and the
+    number of frames (eval/object_matching.hpp, origin_distance)."""
+    import numpy as np
+    total, n = 0.0, 0
+    for e, g in associate(est_obj[0], gt_obj[0]):
+        ec, gc = camera_at(est_cam, est_obj[0][e]), camera_at(gt_cam, gt_obj[0][g])
+        if ec is None or gc is None:
+            continue
+        pe = (np.linalg.inv(est_cam[1][ec]) @ est_obj[1][e])[:3, 3]
+        pg = (np.linalg.inv(gt_cam[1][gc]) @ gt_obj[1][g])[:3, 3]
+        total += float(np.linalg.norm(pe - pg))
+        n += 1
+    return (total / n if n else float('inf')), n
+
+
+def object_ate(est_cam, gt_cam, est_obj, gt_obj):
+    """Object ATE (eval/object_ate.hpp): offset C through the cameras at the first common frame,
+    then the rigid ATE of est_obj(t) C against gt_obj(t). Returns (rmse, matched) or None."""
+    import numpy as np
+    m = associate(est_obj[0], gt_obj[0])
+    if len(m) < 3:
+        return None
+    m.sort(key=lambda p: gt_obj[0][p[1]])
+    Cm = None
+    for e, g in m:
+        ec, gc = camera_at(est_cam, est_obj[0][e]), camera_at(gt_cam, gt_obj[0][g])
+        if ec is None or gc is None:
+            continue
+        Cm = np.linalg.inv(est_obj[1][e]) @ est_cam[1][ec] @ np.linalg.inv(gt_cam[1][gc]) @ gt_obj[1][g]
+        break
+    if Cm is None:
+        return None
+    est_pos = [(est_obj[1][e] @ Cm)[:3, 3] for e, _ in m]
+    gt_pos = [gt_obj[1][g][:3, 3] for _, g in m]
+    return ate_rmse(est_pos, gt_pos), len(m)
+
+
+def match_objects(est_cam, gt_cam, estimates, truth):
+    """eval/object_matching.hpp: each estimate goes to the ground-truth object whose origin is
+    nearest in the camera frame (mean over >= 3 common frames, under MATCH_DISTANCE); a truth
+    object may collect several. Returns {truth name: [estimate ids]} and the unmatched ids."""
+    by = {n: [] for n in truth}
+    unmatched = []
+    for i in sorted(estimates):
+        best, best_d = None, MATCH_DISTANCE
+        for n in sorted(truth):
+            d, k = origin_distance(est_cam, gt_cam, estimates[i], truth[n])
+            if k >= 3 and d < best_d:
+                best, best_d = n, d
+        if best is None:
+            unmatched.append(i)
+        else:
+            by[best].append(i)
+    return by, unmatched
+
+
+def frames_of(traj, frame_t):
+    """Frame indices (into frame_t, sorted) at which trajectory `traj` has a pose."""
+    out = set()
+    for t in traj[0]:
+        k = nearest(frame_t, t)
+        if abs(frame_t[k] - t) <= MAX_DIFF:
+            out.add(k)
+    return out
+
+
+def visible_frames(labels, k, min_area=MIN_AREA):
+    """Frames in which object label k (1-based) is visible by the paper's rule."""
+    return [i for i, fr in enumerate(labels['frames']) if fr['inner'][k - 1] >= min_area]
+
+
+def longest_run(flags):
+    best = cur = 0
+    for f in flags:
+        cur = cur + 1 if f else 0
+        best = max(best, cur)
+    return best
+
+
+def object_metrics(name, k, labels, frame_t, fps, det_every, est_frames, kind):
+    """The per-object numbers that need no poses. est_frames: {estimate id: set of frames}."""
+    n = len(frame_t)
+    vis = visible_frames(labels, k)
+    visset = set(vis)
+    alive = [0] * n
+    for fs in est_frames.values():
+        for f in fs:
+            alive[f] += 1
+    r = dict(name=name, visible=len(vis), visible_any=sum(1 for fr in labels['frames'] if fr['area'][k - 1] > 0),
+             fragments=len(est_frames), duplicate_frames=sum(1 for a in alive if a >= 2))
+    created = min((min(fs) for fs in est_frames.values() if fs), default=None)
+    r['first_visible'] = vis[0] if vis else None
+    r['created'] = created
+    r['coverage'] = (sum(1 for f in vis if alive[f] > 0) / len(vis)) if vis else None
+    # Lost: longest run of consecutive frames, after the first creation, in which the object is
+    # visible and no estimate of it exists (a frame where it is not visible ends a run).
+    start = created if created is not None else n
+    r['lost_frames'] = longest_run([(f >= start and f in visset and alive[f] == 0) for f in range(n)])
+    r['lost_s'] = r['lost_frames'] / fps
+    # Creation: frames from first being visible to the first estimate; allowed one detector
+    # interval plus one per detector frame on which it was visible but not detected (missed).
+    if vis:
+        end = created if created is not None else n
+        missed = 0
+        for f, fr in enumerate(labels['frames']):
+            if vis[0] <= f < end and 'detected' in fr and f in visset and k not in fr['detected']:
+                missed += 1
+        r['missed_detections'] = missed
+        r['creation_allowed'] = det_every * (1 + missed)
+        r['creation_delay'] = (created - vis[0]) if created is not None else None
+    return r
+
+
+def evaluate_run(seq, out, kind):
+    """All numbers of one run: camera ATE, per truth object, false objects."""
+    import numpy as np
+    labels = json.load(open(os.path.join(seq, 'bench_labels.json')))
+    info = json.load(open(os.path.join(seq, 'dyngen.json')))
+    frame_t = np.array([float(fr['t']) for fr in labels['frames']])
+    fps = 1.0 / float(np.median(np.diff(frame_t))) if len(frame_t) > 1 else 30.0
+    gt_cam = read_tum(os.path.join(seq, 'groundtruth.txt'))
+    est_cam = read_tum(os.path.join(out, 'camera.txt'))
+    srt = lambda tr: (tr[0][np.argsort(tr[0], kind='stable')], tr[1][np.argsort(tr[0], kind='stable')])
+    gt_cam, est_cam = srt(gt_cam), srt(est_cam)
+    truth = {o['name']: read_tum(os.path.join(seq, 'groundtruth_objects', o['name'] + '.txt')) for o in info['objects']}
+    estimates, classes = {}, {}
+    for r in read_list(os.path.join(out, 'objects.txt')):
+        i = int(r[0])
+        classes[i] = r[1]
+        p = os.path.join(out, 'objects', '%d.txt' % i)
+        estimates[i] = read_tum(p) if os.path.isfile(p) else (np.zeros(0), np.zeros((0, 4, 4)))
+    by, unmatched = match_objects(est_cam, gt_cam, estimates, truth)
+    res = dict(camera_ate=camera_ate(est_cam, gt_cam), frames=len(frame_t), objects=[],
+               false_objects=len(unmatched), false_object_frames=sum(len(estimates[i][0]) for i in unmatched),
+               estimates=len(estimates))
+    names = labels['objects']
+    for k, n in enumerate(names, 1):
+        ids = by.get(n, [])
+        est_frames = {i: frames_of(estimates[i], frame_t) for i in ids}
+        r = object_metrics(n, k, labels, frame_t, fps, labels['det_every'], est_frames, kind)
+        r['estimates'] = ids
+        r['ate'] = None
+        if ids:
+            primary = max(ids, key=lambda i: (len(estimates[i][0]), -i))
+            a = object_ate(est_cam, gt_cam, estimates[primary], truth[n])
+            r['primary'] = primary
+            if a is not None:
+                r['ate'], r['ate_matched'] = a
+        res['objects'].append(r)
+    return res
+
+
+# ----------------------------------------------------------------------------- report
+
+CRITERIA = [
+    ('lost', 'no object lost for more than %.0f s while visible' % LOST_LIMIT_S),
+    ('dup', 'no duplicates: one fragment per mover, never two estimates at once'),
+    ('create', 'created within one detector interval of first visible plus missed detections'),
+    ('obj_ate', 'object ATE < 1 cm (synthetic), < 2 cm (composite)'),
+    ('coverage', 'coverage of visible frames >= %.0f %%' % (100 * COVERAGE_MIN)),
+    ('cam_ate', 'camera ATE < 0.5 cm (synthetic rooms)'),
+]
+
+
+def judge_object(r, kind):
+    """PASS/FAIL (True/False) per object criterion; None where it does not apply (never visible)."""
+    if not r['visible']:
+        return dict(lost=None, dup=None, create=None, obj_ate=None, coverage=None)
+    return dict(
+        lost=r['created'] is not None and r['lost_s'] <= LOST_LIMIT_S,
+        dup=r['fragments'] == 1 and r['duplicate_frames'] == 0,
+        create=r['creation_delay'] is not None and r['creation_delay'] <= r['creation_allowed'],
+        obj_ate=r['ate'] is not None and r['ate'] < OBJ_ATE_MAX[kind],
+        coverage=r['coverage'] is not None and r['coverage'] >= COVERAGE_MIN)
+
+
+def shown_value(c, r):
+    """The number behind an object criterion, for the summary's list of failures."""
+    if c == 'lost':
+        return 'never created' if r['created'] is None else '%.2f s' % r['lost_s']
+    if c == 'dup':
+        return '%d fragments, %d duplicate frames' % (r['fragments'], r['duplicate_frames'])
+    if c == 'create':
+        return 'never created' if r['creation_delay'] is None else \
+            'delay %d > %d frames' % (r['creation_delay'], r['creation_allowed'])
+    if c == 'obj_ate':
+        return 'no ATE' if r['ate'] is None else '%.2f cm' % (100 * r['ate'])
+    return '%.0f %%' % (100 * r['coverage'])
+
+
+def fmt(v, spec, none='-'):
+    return none if v is None else spec % v
+
+
+def report(args, seqs):
+    rows, results, unscored = [], {}, []
+    for s in seqs:
+        seq, out = seq_dir(args.work, s), run_dir(args.work, s, args.backend)
+        rj = os.path.join(out, 'bench_run.json')
+        if not os.path.isfile(os.path.join(seq, 'bench_labels.json')):
+            log('[report] %s: not generated' % s['name'])
+            unscored.append(s['name'])
+            continue
+        if not os.path.isfile(rj):
+            log('[report] %s: no run for backend %s' % (s['name'], args.backend))
+            unscored.append(s['name'])
+            continue
+        run_info = json.load(open(rj))
+        if run_info['rc'] != 0 or not os.path.isfile(os.path.join(out, 'camera.txt')):
+            results[s['name']] = dict(kind=s['kind'], failed='app rc %d' % run_info['rc'])
+            continue
+        res = evaluate_run(seq, out, s['kind'])
+        res['kind'] = s['kind']
+        res['seconds'] = run_info['seconds']
+        res['cam_pass'] = (res['camera_ate'] is not None and res['camera_ate'] < CAM_ATE_MAX['synthetic']) \
+            if s['kind'] == 'synthetic' else None
+        for r in res['objects']:
+            r['pass'] = judge_object(r, s['kind'])
+        results[s['name']] = res
+
+    hdr = ('sequence', 'kind', 'frames', 'cam ATE', 'object', 'vis (1px)', '1st vis', 'created', 'delay/allowed',
+           'frag', 'dup fr', 'cover', 'lost', 'obj ATE', 'false', 'fails')
+    for name, res in results.items():
+        if 'failed' in res:
+            rows.append((name, res['kind'], '-', res['failed']) + ('',) * (len(hdr) - 4))
+            continue
+        first = True
+        for r in res['objects']:
+            fails = ','.join(c for c, v in r['pass'].items() if v is False)
+            if first and res['cam_pass'] is False:
+                fails = ','.join(x for x in ('cam_ate', fails) if x)
+            rows.append((
+                name if first else '', res['kind'] if first else '', str(res['frames']) if first else '',
+                fmt(res['camera_ate'] and 100 * res['camera_ate'], '%.2f cm') if first else '',
+                r['name'], '%d (%d)' % (r['visible'], r['visible_any']), fmt(r['first_visible'], '%d'),
+                fmt(r['created'], '%d'),
+                '%s/%s' % (fmt(r.get('creation_delay'), '%d'), fmt(r.get('creation_allowed'), '%d')),
+                str(r['fragments']), str(r['duplicate_frames']), fmt(r['coverage'] and 100 * r['coverage'], '%.0f %%'),
+                '%.2f s' % r['lost_s'], fmt(r['ate'] and 100 * r['ate'], '%.2f cm'),
+                ('%d' % res['false_objects']) if first else '', fails or 'ok'))
+            first = False
+    print_table(hdr, rows, args.markdown)
+
+    # summary per criterion
+    print()
+    print('Summary (%s backend, %d sequences scored):' % (args.backend, len(results)))
+    all_pass = True
+    for c, text in CRITERIA:
+        ok = tot = 0
+        bad = []
+        for name, res in results.items():
+            if 'failed' in res:
+                tot += 1
+                bad.append(name + ' (app failed)')
+                continue
+            if c == 'cam_ate':
+                if res['cam_pass'] is None:
+                    continue
+                tot += 1
+                ok += res['cam_pass']
+                if not res['cam_pass']:
+                    bad.append('%s %s' % (name, fmt(res['camera_ate'] and 100 * res['camera_ate'], '%.2f cm')))
+                continue
+            for r in res['objects']:
+                v = r['pass'][c]
+                if v is None:
+                    continue
+                tot += 1
+                ok += bool(v)
+                if not v:
+                    bad.append('%s/%s (%s)' % (name, r['name'], shown_value(c, r)))
+        verdict = 'PASS' if tot and ok == tot else ('FAIL' if tot else 'n/a')
+        all_pass &= verdict != 'FAIL'
+        print('  %-4s %-82s %d/%d%s' % (verdict, text, ok, tot, ('  failing: ' + '; '.join(bad)) if bad else ''))
+    nf = sum(res.get('false_objects', 0) for res in results.values())
+    print('  info false objects (estimates matched to no mover): %d' % nf)
+    if unscored:
+        print('  not scored (no sequence or no run): %s' % ', '.join(unscored))
+    print('  overall: %s%s' % ('PASS' if all_pass and results else 'FAIL',
+                               ' (on the %d scored sequences only)' % len(results) if unscored else ''))
+    if args.json:
+        with open(args.json, 'w') as f:
+            json.dump(results, f, indent=1, default=lambda o: sorted(o) if isinstance(o, set) else str(o))
+    return 0 if all_pass and results else 1
+
+
+def print_table(hdr, rows, markdown):
+    if markdown:
+        print('| ' + ' | '.join(hdr) + ' |')
+        print('|' + ' --- |' * len(hdr))
+        for r in rows:
+            print('| ' + ' | '.join(r) + ' |')
+        return
+    w = [max(len(str(x)) for x in col) for col in zip(hdr, *rows)] if rows else [len(h) for h in hdr]
+    print('  '.join(h.ljust(w[i]) for i, h in enumerate(hdr)))
+    for r in rows:
+        print('  '.join(str(x).ljust(w[i]) for i, x in enumerate(r)))
+
+
+# ----------------------------------------------------------------------------- self-test
+
+def selftest():
+    """Checks of the metric code on small constructed cases."""
+    import numpy as np
+    # visibility rule: a 40x40 block inside the border counts; moved partly into the border not
+    lab = np.zeros((120, 160), np.uint8)
+    lab[30:70, 40:80] = 1
+    assert inner_area(lab, 1) == 1600
+    lab2 = np.zeros((120, 160), np.uint8)
+    lab2[10:50, 40:80] = 2       # 10 of its 40 rows in the top border
+    assert inner_area(lab2, 2) == 1200 and int((lab2 == 2).sum()) == 1600
+    lab3 = np.zeros((120, 160), np.uint8)
+    lab3[20:60, 20:60] = 3       # touches the border from inside: all counted
+    assert inner_area(lab3, 3) == 1600
+    # detections: an instance is object k when half its pixels are on k
+    det = np.zeros((120, 160), np.uint8)
+    det[30:70, 40:60] = 5        # on object 1
+    det[90:110, 100:150] = 7     # nowhere: a false positive
+    assert detected_labels(det, lab, [5, 7, 9]) == [1]
+
+    # a sequence of 12 frames, detector every 3 frames; object 1 visible (inner area 1600) from
+    # frame 2 on except frames 8-9 (only 1599 inner pixels, still seen by the 1-pixel rule)
+    fr = []
+    for f in range(12):
+        inner = 1600 if f >= 2 and f not in (8, 9) else (1599 if f in (8, 9) else 0)
+        d = dict(t='%.6f' % (f / 30), area=[inner + 5 if inner else 0], inner=[inner])
+        if f % 3 == 0:
+            d['detected'] = [1] if f not in (3,) else []    # missed at frame 3
+        fr.append(d)
+    labels = dict(frames=fr, objects=['a'], det_every=3)
+    ft = np.array([f / 30 for f in range(12)])
+    assert visible_frames(labels, 1) == [2, 3, 4, 5, 6, 7, 10, 11]
+    # one estimate from frame 6 (created after the missed frame 3: allowed 3 * (1 + 1) = 6)
+    m = object_metrics('a', 1, labels, ft, 30.0, 3, {4: set(range(6, 12))}, 'synthetic')
+    assert m['first_visible'] == 2 and m['created'] == 6 and m['creation_delay'] == 4
+    assert m['missed_detections'] == 1 and m['creation_allowed'] == 6
+    assert m['fragments'] == 1 and m['duplicate_frames'] == 0 and m['lost_frames'] == 0
+    assert abs(m['coverage'] - 4 / 8) < 1e-12 and m['visible'] == 8 and m['visible_any'] == 10
+    j = judge_object(dict(m, ate=0.004), 'synthetic')
+    assert j == dict(lost=True, dup=True, create=True, obj_ate=True, coverage=False), j
+    # two fragments, overlapping at frames 5-6 (duplicates), a gap 7,10 of which 7 and 10-11 are
+    # visible: runs 7 (1 frame; 8-9 are not visible and end the run) and 10-11 (2 frames)
+    m = object_metrics('a', 1, labels, ft, 30.0, 3, {1: {2, 3, 4, 5, 6}, 2: {5, 6}}, 'synthetic')
+    assert m['fragments'] == 2 and m['duplicate_frames'] == 2 and m['lost_frames'] == 2
+    assert m['creation_delay'] == 0 and m['missed_detections'] == 0
+    j = judge_object(dict(m, ate=0.015), 'composite')
+    assert j['dup'] is False and j['obj_ate'] is True and j['lost'] is True
+    # never created: creation and lost fail, coverage 0
+    m = object_metrics('a', 1, labels, ft, 30.0, 3, {}, 'synthetic')
+    assert m['created'] is None and m['missed_detections'] == 1 and m['coverage'] == 0
+    j = judge_object(dict(m, ate=None), 'synthetic')
+    assert not any(j.values())
+    # lost longer than 1 s at 30 fps: visible 0-99, estimate 0-9 and 50-99: 40 frames = 1.33 s
+    fr = [dict(t='%.6f' % (f / 30), area=[2000], inner=[2000]) for f in range(100)]
+    labels = dict(frames=fr, objects=['a'], det_every=30)
+    m = object_metrics('a', 1, labels, np.arange(100) / 30, 30.0, 30,
+                       {1: set(range(10)), 2: set(range(50, 100))}, 'synthetic')
+    assert m['lost_frames'] == 40 and abs(m['lost_s'] - 40 / 30) < 1e-12 and m['fragments'] == 2
+    assert judge_object(dict(m, ate=0.001), 'synthetic')['lost'] is False
+
+    # association, alignment, ATE and object ATE: an estimate in another world frame and another
+    # object frame gives 0; a known offset gives its RMSE
+    assert associate([0.0, 0.01, 0.1], [0.005, 0.1, 0.2]) == [(0, 0), (2, 1)]
+    rng = np.random.default_rng(1)
+
+    def rot(axis, ang):
+        a = np.asarray(axis, float) / np.linalg.norm(axis)
+        K = np.array([[0, -a[2], a[1]], [a[2], 0, -a[0]], [-a[1], a[0], 0]])
+        return np.eye(3) + np.sin(ang) * K + (1 - np.cos(ang)) * K @ K
+
+    def pose(R, t):
+        T = np.eye(4)
+        T[:3, :3], T[:3, 3] = R, t
+        return T
+
+    n = 20
+    t = np.arange(n) / 30.0
+    gc = np.stack([pose(rot([0, 1, 0.2], 0.05 * i), [0.02 * i, 0.01 * i * i / 20, 0.1]) for i in range(n)])
+    go = np.stack([pose(rot([0, 0, 1], 0.1 * i), [1 + 0.03 * i, 0.5, 0.02 * i]) for i in range(n)])
+    W = pose(rot([1, 2, 3], 0.7), [3, -1, 2])             # estimate's world frame
+    O = pose(rot([0.3, 1, 0], 0.4), [0.05, -0.02, 0.1])   # estimate's object frame
+    ec = np.einsum('ij,njk->nik', np.linalg.inv(W), gc)
+    eo = np.einsum('ij,njk,kl->nil', np.linalg.inv(W), go, O)
+    assert camera_ate((t, ec), (t, gc)) < 1e-9
+    a, k = object_ate((t, ec), (t, gc), (t, eo), (t, go))
+    assert a < 1e-9 and k == n
+    # a 2 cm error along the world's x at every other frame (not the first, which sets the
+    # offset): the best fit splits it, +-1 cm (a rotation can take off a little)
+    eo2 = eo.copy()
+    eo2[1::2, :3, 3] += np.linalg.inv(W)[:3, :3] @ [0.02, 0, 0]
+    a, _ = object_ate((t, ec), (t, gc), (t, eo2), (t, go))
+    assert 0.009 < a <= 0.01 + 1e-12, a
+    # matching: the estimate goes to the nearer truth object, a far one to none
+    go_far = go.copy()
+    go_far[:, :3, 3] += [0.5, 0, 0]
+    eo_far = np.einsum('ij,njk->nik', np.linalg.inv(W), go_far)
+    eo_far[:, :3, 3] += [0, 2, 0]
+    by, unmatched = match_objects((t, ec), (t, gc), {1: (t, eo), 2: (t[:2], eo[:2]), 3: (t, eo_far)},
+                                  {'a': (t, go), 'b': (t, go_far)})
+    assert by == {'a': [1], 'b': []} and unmatched == [2, 3], (by, unmatched)
+    print('selftest: all checks passed')
+    return 0
+
+
+# ----------------------------------------------------------------------------- main
+
+def main():
+    if len(sys.argv) == 3 and sys.argv[1] == '_labels':   # internal: labels_summary through /usr/bin/python3
+        write_labels_summary(sys.argv[2])
+        return 0
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument('step', choices=['list', 'generate', 'export', 'run', 'report', 'all', 'selftest'])
+    ap.add_argument('--work', default=os.path.join(HERE, 'out'),
+                    help='folder for sequences and runs (default bench/out, git-ignored)')
+    ap.add_argument('--app', default=os.path.join(REPO, 'build', 'examples', 'emfusion'),
+                    help='the emfusion app (default build/examples/emfusion)')
+    ap.add_argument('--backend', default='cpu', choices=['cpu', 'cuda'])
+    ap.add_argument('--jobs', type=int, default=1, help='app runs in parallel (default 1)')
+    ap.add_argument('--gen-jobs', type=int, default=min(os.cpu_count() or 1, 16),
+                    help="processes for the generator's rendering (default: the cores, at most 16)")
+    ap.add_argument('--only', default=None, help='comma-separated sequence names (of the full or quick list)')
+    ap.add_argument('--quick', action='store_true', help='the two short validation sequences only')
+    ap.add_argument('--to', default=None, help='export: the folder to copy the sequences to')
+    ap.add_argument('--markdown', action='store_true', help='print the table as markdown')
+    ap.add_argument('--json', default=None, help='also write the scored results to this file')
+    ap.add_argument('--app-arg', dest='app_args', action='append', default=[],
+                    help='extra argument for `emfusion run` (repeatable, e.g. --app-arg=--set --app-arg=key=value)')
+    args = ap.parse_args()
+    args.work = os.path.abspath(args.work)
+    args.app = os.path.abspath(args.app)
+
+    if args.step == 'selftest':
+        return selftest()
+    seqs = QUICK if args.quick else SEQUENCES
+    if args.only:
+        want = args.only.split(',')
+        known = {s['name']: s for s in SEQUENCES + QUICK}
+        missing = [w for w in want if w not in known]
+        if missing:
+            raise SystemExit('unknown sequence(s): %s (see the list step)' % ', '.join(missing))
+        seqs = [known[w] for w in want]
+    if args.step == 'list':
+        for s in seqs:
+            base = base_dir(args.work, s['base']) if s['kind'] == 'composite' else None
+            d = seq_dir(args.work, s)
+            state = 'generated' if os.path.isfile(os.path.join(d, 'bench_labels.json')) else 'missing'
+            runs = [b for b in ('cpu', 'cuda') if os.path.isfile(os.path.join(run_dir(args.work, s, b), 'bench_run.json'))]
+            print('%-20s %-9s %-9s runs: %-8s %s' % (s['name'], s['kind'], state, ','.join(runs) or '-', ' '.join(
+                shlex.quote(c) for c in dyngen_command(s, d, base, args.gen_jobs))))
+        return 0
+    if args.step in ('generate', 'all'):
+        generate(args, seqs)
+    if args.step == 'export':
+        export(args, seqs)
+    if args.step in ('run', 'all'):
+        run(args, seqs)
+    if args.step in ('report', 'all'):
+        return report(args, seqs)
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
