@@ -281,9 +281,16 @@ class Reader {
     std::vector<float> bg = compressed<float>(n, "an object's background counts");
     ForegroundCounts<S, B> counts(d, volume.voxel_size(), backend);
     counts.assign_from_host(fg, bg);
-    return std::make_unique<ObjectModel<S, B>>(ObjectModel<S, B>::restore(
+    auto o = std::make_unique<ObjectModel<S, B>>(ObjectModel<S, B>::restore(
         id, std::move(class_name), std::move(scores), T_world_object, T_object_volume, std::move(volume),
         std::move(counts), existence, non_existence));
+    // The volume's pose is T_world_object T_object_volume again: finite
+    // factors can still overflow in the product.
+    const SE3<S>& T = o->volume().pose();
+    for (int i = 0; i < 9; ++i)
+      if (!std::isfinite(double(T.rotation()[i])) || (i < 3 && !std::isfinite(double(T.translation()[i]))))
+        fail("object " + std::to_string(id) + ": its poses overflow");
+    return o;
   }
 
  private:
