@@ -5,7 +5,9 @@
 //                [--intrinsics fr1|fr2|fr3|default|fx,fy,cx,cy[,width,height]]
 //                [--depth-scale S] [--backend cpu|cuda] [--config <file>]
 //                [--set key=value ...] [--max-frames N]
+//                [--checkpoint-every N] [--resume <dir>]
 //   emfusion eval <sequence> <output-dir>
+//   emfusion mesh <checkpoint> --output <dir>
 //
 // <input> is, by what is on disk (docs/io.md, "Inputs of the emfusion app"):
 //   synthetic:<scene>   a built-in scene (room, room-small, room1, room8; no
@@ -25,7 +27,10 @@
 // object errors. The trajectories are written as the frames go; SIGINT or
 // SIGTERM stops a run after the frame in progress with every output written
 // for the frames processed, and exit status 130 / 143 (docs/user-guide.md,
-// "Stopping a run").
+// "Stopping a run"). --checkpoint-every N saves the whole state to
+// <output>/checkpoint.emfckpt every N frames and when the run ends; --resume
+// <dir> goes on from <dir>/checkpoint.emfckpt with the same input and
+// parameters ("Resuming a run"); `mesh` writes the meshes of a checkpoint.
 #include <unistd.h>
 
 #include <algorithm>
@@ -50,6 +55,7 @@
 #include "emfusion/eval/ate.hpp"
 #include "emfusion/eval/object_matching.hpp"
 #include "emfusion/eval/rpe.hpp"
+#include "emfusion/io/checkpoint.hpp"
 #include "emfusion/io/cofusion.hpp"
 #include "emfusion/io/config.hpp"
 #include "emfusion/io/intrinsics.hpp"
@@ -78,6 +84,8 @@ struct RunOptions {
   double depth_scale = 0;
   std::vector<std::string> overrides;
   int max_frames = 0;
+  int checkpoint_every = 0;
+  std::string resume;
   bool verbose = false;
   bool pictures = false;
 };
@@ -454,6 +462,16 @@ class StreamedOutputs {
   std::chrono::steady_clock::time_point last_sync_;
 };
 
+/// meshes/background.ply and meshes/object_<id>.ply of every live object.
+template <class B>
+void write_meshes(const fs::path& dir, const Map<S, B>& map) {
+  const auto& bg = map.background;
+  write_ply((dir / "background.ply").string(), transformed(marching_cubes(bg, S(0), S(1)), bg.pose()));
+  for (const auto& obj : map.objects)
+    write_ply((dir / ("object_" + std::to_string(obj->id()) + ".ply")).string(),
+              transformed(marching_cubes(obj->volume(), S(0), S(1)), obj->T_object_volume()));
+}
+
 template <class B>
 void run(const RunOptions& o) {
   SystemParams<S> params;
@@ -477,6 +495,19 @@ void run(const RunOptions& o) {
 
   const B backend{};
   System<S, B> system(in.camera.cast<S>(), params, backend);
+  // A resumed run goes on at the frame after the checkpoint's last one: the
+  // frame count is the index of the next input frame.
+  std::size_t first = 0;
+  if (!o.resume.empty()) {
+    const std::string from = (fs::path(o.resume) / "checkpoint.emfckpt").string();
+    restore_checkpoint(system, from);
+    first = std::size_t(system.frame_count());
+    if (first > frames)
+      throw std::runtime_error("'" + from + "' has " + std::to_string(first) + " frames processed, but '" + o.input +
+                               "' gives only " + std::to_string(frames));
+    std::fprintf(stderr, "emfusion: resuming from '%s' at frame %zu\n", from.c_str(), first);
+  }
+  const std::string checkpoint = (out / "checkpoint.emfckpt").string();
   // run.json is written before the first frame, saying "running", and
   // replaced at the end: one that still says so is a run killed on the way.
   const auto run_summary = [&](JsonWriter& json, const char* status, std::size_t processed) {
@@ -497,22 +528,27 @@ void run(const RunOptions& o) {
     write_text_file((out / "run.json").string(), json.str());
   }
   StreamedOutputs streams(o.output);
+  // The trajectories so far, from the checkpoint: the files come out as
+  // those of a run that never stopped.
+  if (first > 0) streams.update(system.camera_trajectory(), system.object_records());
 
   std::vector<StageTimes> times;
   // One updating progress line on a terminal; plain lines on a pipe and in
   // CI (which may run the app on a pseudo-terminal).
   const bool tty = isatty(fileno(stderr)) && std::getenv("CI") == nullptr;
   const auto start = std::chrono::steady_clock::now();
-  std::size_t processed = 0;
+  std::size_t processed = first;
   // A signal stops the loop between frames; the outputs below are then
   // those of the frames processed.
-  for (std::size_t i = 0; i < frames && examples::interrupt_signal() == 0; ++i) {
+  for (std::size_t i = first; i < frames && examples::interrupt_signal() == 0; ++i) {
     const double t = in.timestamp(i);
     const Image<S, B> depth = in.depth(i).template to<B>(backend);
     const std::optional<Detections> det = in.detect(int(i), t);
     const FrameResult r = system.process(depth, t, det ? &*det : nullptr);
     processed = i + 1;
     streams.update(system.camera_trajectory(), system.object_records());
+    if (o.checkpoint_every > 0 && processed % std::size_t(o.checkpoint_every) == 0 && processed < frames)
+      save_checkpoint(checkpoint, system);
     times.push_back(r.times);
     if (o.pictures) write_pictures(pictures, i, in.colour(i), system, r);
     if (o.verbose) {
@@ -534,7 +570,7 @@ void run(const RunOptions& o) {
                      tty ? "\n" : "", i, r.invalid_detections, r.detections_over_cap);
     }
     const double elapsed = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-    const double fps = double(i + 1) / elapsed;
+    const double fps = double(i + 1 - first) / elapsed;
     if (tty) {
       const int width = 30, done = int(width * double(i + 1) / double(frames));
       const long left = std::lround(double(frames - i - 1) / fps);
@@ -556,16 +592,13 @@ void run(const RunOptions& o) {
 
   // Outputs (FORMATS.md section 5): the trajectories are complete already.
   streams.close();
+  if (o.checkpoint_every > 0) save_checkpoint(checkpoint, system);
   const std::vector<ObjectListEntry> list = object_list(system.object_records());
   write_object_list((out / "objects.txt").string(), list);
   std::map<int, Trajectory> est_objects;
   for (const ObjectRecord& r : system.object_records())
     if (!r.person) est_objects[r.id] = r.trajectory;
-  const auto& bg = system.background();
-  write_ply((out / "meshes" / "background.ply").string(), transformed(marching_cubes(bg, S(0), S(1)), bg.pose()));
-  for (const auto& obj : system.objects())
-    write_ply((out / "meshes" / ("object_" + std::to_string(obj->id()) + ".ply")).string(),
-              transformed(marching_cubes(obj->volume(), S(0), S(1)), obj->T_object_volume()));
+  write_meshes(out / "meshes", system.map());
 
   JsonWriter json;
   run_summary(json, interrupted ? "interrupted" : "finished", processed);
@@ -611,6 +644,15 @@ void run(const RunOptions& o) {
                 processed, frames);
   else
     std::printf("wrote %s\n", o.output.c_str());
+}
+
+/// `emfusion mesh`: the meshes of a checkpoint's map, without its sequence.
+void mesh(const std::string& checkpoint, const std::string& output) {
+  const Checkpoint<S, Host> ck = load_checkpoint<S, Host>(checkpoint);
+  const fs::path dir = fs::path(output) / "meshes";
+  create_output_directory(dir.string());
+  write_meshes(dir, ck.map);
+  std::printf("wrote %s (%zu objects, %d frames)\n", dir.string().c_str(), ck.map.objects.size(), ck.map.frames);
 }
 
 void evaluate(const std::string& sequence, const std::string& output) {
@@ -673,12 +715,23 @@ int main(int argc, char** argv) {
   run_cmd->add_option("--set", o.overrides, "override a parameter: key=value (repeatable)");
   run_cmd->add_option("--max-frames", o.max_frames, "process at most N frames")->check(CLI::PositiveNumber);
   run_cmd->add_flag("--verbose,-v", o.verbose, "log object creation and deletion, refused frames and ignored detections");
+  run_cmd
+      ->add_option("--checkpoint-every", o.checkpoint_every,
+                   "save the whole state to <output>/checkpoint.emfckpt every N frames and at the end")
+      ->check(CLI::PositiveNumber);
+  run_cmd->add_option("--resume", o.resume,
+                      "go on from <dir>/checkpoint.emfckpt (same input and parameters as the run that saved it)");
   run_cmd->add_flag("--pictures", o.pictures,
                     "write per-frame segmentation and association pictures to <output>/pictures/");
   std::string eval_sequence, eval_output;
   auto* eval_cmd = app.add_subcommand("eval", "evaluate a run's outputs against a sequence's ground truth");
   eval_cmd->add_option("sequence", eval_sequence, "sequence directory or synthetic:<scene>")->required();
   eval_cmd->add_option("output", eval_output, "output directory of `emfusion run`")->required();
+  std::string mesh_checkpoint, mesh_output;
+  auto* mesh_cmd = app.add_subcommand("mesh", "write the meshes of a checkpoint (no sequence needed)");
+  mesh_cmd->add_option("checkpoint", mesh_checkpoint, "a checkpoint.emfckpt of `emfusion run --checkpoint-every`")
+      ->required();
+  mesh_cmd->add_option("--output,-o", mesh_output, "output directory (meshes go to <dir>/meshes/)")->required();
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
@@ -691,6 +744,8 @@ int main(int argc, char** argv) {
       // Stopped by a signal (even one that came after the last frame): the
       // shell's convention, 128 + the signal's number.
       if (const int sig = examples::interrupt_signal()) return 128 + sig;
+    } else if (*mesh_cmd) {
+      mesh(mesh_checkpoint, mesh_output);
     } else {
       evaluate(eval_sequence, eval_output);
     }

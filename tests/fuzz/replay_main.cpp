@@ -48,6 +48,9 @@
 #define LLVMFuzzerTestOneInput replay_png
 #include "fuzz_png.cpp"
 #undef LLVMFuzzerTestOneInput
+#define LLVMFuzzerTestOneInput replay_checkpoint
+#include "fuzz_checkpoint.cpp"
+#undef LLVMFuzzerTestOneInput
 
 namespace {
 
@@ -68,6 +71,7 @@ constexpr Target targets[] = {
     {"klg", replay_klg},
     {"exr", replay_exr},
     {"png", replay_png},
+    {"checkpoint", replay_checkpoint},
 };
 
 bool replay(EntryPoint run, const std::filesystem::path& file) {

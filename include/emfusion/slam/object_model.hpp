@@ -58,6 +58,19 @@ class ObjectModel {
     sync_volume_pose();
   }
 
+  /// An object with all its state given (io/checkpoint.hpp loads one so):
+  /// the volume and counts must share their dimensions and voxel size.
+  static ObjectModel restore(int id, std::string class_name, std::vector<std::pair<std::string, double>> class_scores,
+                             const SE3<S>& T_world_object, const SE3<S>& T_object_volume, TsdfVolume<S, B> volume,
+                             ForegroundCounts<S, B> foreground, int existence, int non_existence) {
+    const Vec3i& d = volume.dims();
+    const Vec3i& f = foreground.dims();
+    detail::require(d[0] == f[0] && d[1] == f[1] && d[2] == f[2] && volume.voxel_size() == foreground.voxel_size(),
+                    "ObjectModel::restore", "the volume and the foreground counts differ in their grid");
+    return ObjectModel(id, std::move(class_name), std::move(class_scores), T_world_object, T_object_volume,
+                       std::move(volume), std::move(foreground), existence, non_existence);
+  }
+
   int id() const { return id_; }
   /// The class with the highest accumulated score.
   const std::string& class_name() const { return class_name_; }
@@ -146,6 +159,15 @@ class ObjectModel {
   std::size_t memory_bytes() const { return volume_.memory_bytes() + foreground_.memory_bytes(); }
 
  private:
+  ObjectModel(int id, std::string class_name, std::vector<std::pair<std::string, double>> class_scores,
+              const SE3<S>& T_world_object, const SE3<S>& T_object_volume, TsdfVolume<S, B> volume,
+              ForegroundCounts<S, B> foreground, int existence, int non_existence)
+      : id_(id), class_name_(std::move(class_name)), class_scores_(std::move(class_scores)),
+        T_world_object_(T_world_object), T_object_volume_(T_object_volume), volume_(std::move(volume)),
+        foreground_(std::move(foreground)), existence_(existence), non_existence_(non_existence) {
+    sync_volume_pose();
+  }
+
   static VolumeGeometry<S> geometry(const Vec3i& dims, S voxel_size, S truncation_voxels) {
     VolumeGeometry<S> g;
     g.dims = dims;

@@ -147,6 +147,18 @@ class System {
     return finish(result, clock);
   }
 
+  /// Replaces the whole state with `map` (a loaded checkpoint,
+  /// io/checkpoint.hpp): processing goes on from map.frames as if this
+  /// system had built it. The map must have this system's background grid.
+  void restore(Map<S, B>&& map) {
+    const VolumeGeometry<S> want = background_geometry(params_);
+    const Vec3i& d = map.background.dims();
+    detail::require(d[0] == want.dims[0] && d[1] == want.dims[1] && d[2] == want.dims[2] &&
+                        map.background.voxel_size() == want.voxel_size,
+                    "System::restore", "the map's background grid differs from the parameters' one");
+    map_ = std::move(map);
+  }
+
   const PinholeCamera<S>& camera() const { return camera_; }
   const SystemParams<S>& params() const { return params_; }
   const Parts& parts() const { return parts_; }

@@ -8,8 +8,11 @@
 
 #include <cmath>
 #include <cstdint>
+#include <string>
 #include <type_traits>
+#include <vector>
 
+#include <thrust/copy.h>
 #include <thrust/fill.h>
 
 #include "emfusion/core/camera.hpp"
@@ -92,6 +95,20 @@ class ForegroundCounts {
   View view() { return make<View>(raw(fg_), raw(bg_)); }
   ConstView view() const { return make<ConstView>(raw(fg_), raw(bg_)); }
 
+  /// Fg and Bg counts as host vectors (x-fastest), synchronising first.
+  std::vector<Count> fg_to_host() const { return to_host(fg_); }
+  std::vector<Count> bg_to_host() const { return to_host(bg_); }
+  /// Replaces every count with host values in the layout of fg_to_host and
+  /// bg_to_host: how saved counts come back (io/checkpoint.hpp).
+  void assign_from_host(const std::vector<Count>& fg, const std::vector<Count>& bg) {
+    detail::require(fg.size() == fg_.size() && bg.size() == bg_.size(), "ForegroundCounts::assign_from_host",
+                    "expected " + std::to_string(fg_.size()) + " voxels, got " + std::to_string(fg.size()) + " Fg and " +
+                        std::to_string(bg.size()) + " Bg counts");
+    backend_.synchronize();
+    thrust::copy(fg.begin(), fg.end(), fg_.begin());
+    thrust::copy(bg.begin(), bg.end(), bg_.begin());
+  }
+
  private:
   template <class V, class P>
   V make(P* fg, P* bg) const {
@@ -104,6 +121,13 @@ class ForegroundCounts {
   template <class Vec>
   static auto* raw(Vec& v) {
     return thrust::raw_pointer_cast(v.data());
+  }
+  template <class Vec>
+  std::vector<Count> to_host(const Vec& v) const {
+    backend_.synchronize();
+    std::vector<Count> out(v.size());
+    thrust::copy(v.begin(), v.end(), out.begin());
+    return out;
   }
 
   Vec3i dims_{{0, 0, 0}};

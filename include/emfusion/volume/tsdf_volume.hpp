@@ -243,6 +243,16 @@ class TsdfVolume {
   /// SDF values and weights as host vectors (x-fastest), synchronising first.
   std::vector<Store> sdf_to_host() const { return to_host(sdf_); }
   std::vector<Store> weight_to_host() const { return to_host(weight_); }
+  /// Replaces every voxel with host values in the layout of sdf_to_host and
+  /// weight_to_host: how a saved volume comes back (io/checkpoint.hpp).
+  void assign_from_host(const std::vector<Store>& sdf, const std::vector<Store>& weight) {
+    detail::require(sdf.size() == sdf_.size() && weight.size() == weight_.size(), "TsdfVolume::assign_from_host",
+                    "expected " + std::to_string(sdf_.size()) + " voxels, got " + std::to_string(sdf.size()) + " SDF values and " +
+                        std::to_string(weight.size()) + " weights");
+    backend_.synchronize();
+    thrust::copy(sdf.begin(), sdf.end(), sdf_.begin());
+    thrust::copy(weight.begin(), weight.end(), weight_.begin());
+  }
 
   /// A copy of this volume on another backend.
   template <Backend B2>

@@ -1,0 +1,214 @@
+// Checkpoints (io/checkpoint.hpp): a run saved, loaded into a new system and
+// continued gives the poses of a run that never stopped (bit for bit on the
+// CPU), a loaded map meshes like the saved one, and every damaged,
+// foreign, newer or mismatched checkpoint is refused naming the file.
+#include <cmath>
+#include <cstdint>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "emfusion/io/checkpoint.hpp"
+#include "emfusion/volume/marching_cubes.hpp"
+#include "support/catch.hpp"
+#include "support/configs.hpp"
+#include "support/files.hpp"
+#include "support/fusion.hpp"
+
+using namespace emfusion;
+using emfusion::test::contains;
+using emfusion::test::error_of;
+
+namespace {
+
+/// A wall 2 m ahead and a box in front of it, seen by a 160x120 camera that
+/// moves 1 cm to the side per frame while the box moves 1 cm up; the box is
+/// detected as a "cup" on even frames.
+template <class S>
+struct CheckpointScene {
+  PinholeCamera<S> camera{S(140), S(140), S(79.5), S(59.5), 160, 120};
+
+  SE3<S> camera_pose(int i) const { return SE3<S>::translation(vec3(S(0.01) * S(i), S(0), S(0))); }
+  sim::Scene<S> scene(int i) const {
+    sim::Scene<S> s;
+    s.add(sim::make_plane(sim::look_at(vec3(S(0), S(0), S(2)), Vec3<S>::zero(), vec3(S(0), S(-1), S(0)))));
+    s.add(sim::make_box(SE3<S>(so3_exp(vec3(S(0.2), S(0.4), S(0))), vec3(S(0), S(-0.01) * S(i), S(1.2))),
+                        vec3(S(0.15), S(0.1), S(0.12))));
+    return s;
+  }
+  static SystemParams<S> params() {
+    SystemParams<S> p;
+    p.background_voxels = 128;
+    p.background_voxel_size = S(0.025);
+    return p;
+  }
+  /// Frame i into `system`.
+  template <class B, class Sys>
+  void feed(Sys& system, int i) const {
+    Image<int, Host> labels;
+    Image<S, Host> depth;
+    sim::render_depth(scene(i), camera, camera_pose(i), depth, &labels);
+    const double t = 0.1 * i;
+    if (i % 2 == 0) {
+      Detections d;
+      d.timestamp = t;
+      std::vector<std::uint16_t> px;
+      for (int l : labels.to_host()) px.push_back(std::uint16_t(l == 1 ? 5 : 0));
+      d.labels = Image<std::uint16_t, Host>::from_host(labels.width(), labels.height(), px);
+      d.instances.push_back({5, "cup", 0.95});
+      system.process(depth.template to<B>(), t, &d);
+    } else {
+      system.process(depth.template to<B>(), t);
+    }
+  }
+};
+
+double pose_diff(const SE3<double>& a, const SE3<double>& b) {
+  double d = 0;
+  for (int i = 0; i < 9; ++i) d = std::max(d, std::abs(a.rotation()[i] - b.rotation()[i]));
+  for (int i = 0; i < 3; ++i) d = std::max(d, std::abs(a.translation()[i] - b.translation()[i]));
+  return d;
+}
+
+/// The largest difference between two trajectories' poses (infinite if
+/// their lengths or timestamps differ).
+double max_abs_diff(const Trajectory& a, const Trajectory& b) {
+  if (a.size() != b.size()) return INFINITY;
+  double d = 0;
+  for (std::size_t k = 0; k < a.size(); ++k) {
+    if (a[k].timestamp != b[k].timestamp) return INFINITY;
+    d = std::max(d, pose_diff(a[k].pose, b[k].pose));
+  }
+  return d;
+}
+
+}  // namespace
+
+TEMPLATE_LIST_TEST_CASE("Checkpoints: save, load, continue equals the uninterrupted run", "[io][checkpoint]",
+                        emfusion::test::AllConfigs) {
+  using S = typename TestType::Scalar;
+  using B = typename TestType::Backend;
+  const CheckpointScene<S> scene;
+  constexpr int first = 3, total = 7;
+  const emfusion::test::ScratchDir dir;
+  const std::string path = dir.file("run.emfckpt");
+
+  System<S, B> straight(scene.camera, scene.params());
+  for (int i = 0; i < total; ++i) scene.template feed<B>(straight, i);
+
+  {
+    System<S, B> before(scene.camera, scene.params());
+    for (int i = 0; i < first; ++i) scene.template feed<B>(before, i);
+    REQUIRE(!before.objects().empty());
+    save_checkpoint(path, before);
+    // Saving what was loaded gives the same bytes: nothing is lost or changed.
+    const Checkpoint<S, B> loaded = load_checkpoint<S, B>(path);
+    CHECK(checkpoint_bytes(loaded.map, loaded.camera) == emfusion::test::read_bytes(path));
+  }
+  System<S, B> resumed(scene.camera, scene.params());
+  restore_checkpoint(resumed, path);
+  CHECK(resumed.frame_count() == first);
+  for (int i = first; i < total; ++i) scene.template feed<B>(resumed, i);
+
+  // Bit for bit on the CPU; the GPU's atomics sum in any order.
+  const double tolerance = B::is_device ? 1e-6 : 0.0;
+  CHECK(resumed.frame_count() == straight.frame_count());
+  CHECK(max_abs_diff(resumed.camera_trajectory(), straight.camera_trajectory()) <= tolerance);
+  REQUIRE(resumed.object_records().size() == straight.object_records().size());
+  REQUIRE(!straight.object_records().empty());
+  for (std::size_t k = 0; k < straight.object_records().size(); ++k) {
+    const ObjectRecord &a = resumed.object_records()[k], &b = straight.object_records()[k];
+    CHECK(a.id == b.id);
+    CHECK(a.class_name == b.class_name);
+    CHECK(a.deleted == b.deleted);
+    CHECK(max_abs_diff(a.trajectory, b.trajectory) <= tolerance);
+  }
+  REQUIRE(resumed.objects().size() == straight.objects().size());
+  for (std::size_t k = 0; k < straight.objects().size(); ++k)
+    CHECK(pose_diff(resumed.objects()[k]->pose().template cast<double>(),
+                    straight.objects()[k]->pose().template cast<double>()) <= tolerance);
+  if constexpr (!B::is_device)
+    CHECK(checkpoint_bytes(resumed.map(), resumed.camera()) == checkpoint_bytes(straight.map(), straight.camera()));
+}
+
+TEMPLATE_LIST_TEST_CASE("Checkpoints: a loaded map meshes without the sequence", "[io][checkpoint]",
+                        emfusion::test::AllConfigs) {
+  using S = typename TestType::Scalar;
+  using B = typename TestType::Backend;
+  const CheckpointScene<S> scene;
+  const emfusion::test::ScratchDir dir;
+  System<S, B> system(scene.camera, scene.params());
+  for (int i = 0; i < 2; ++i) scene.template feed<B>(system, i);
+  save_checkpoint(dir.file("a.emfckpt"), system);
+  const Checkpoint<S, B> ck = load_checkpoint<S, B>(dir.file("a.emfckpt"));
+  const auto before = marching_cubes(system.background(), S(0), S(1));
+  const auto after = marching_cubes(ck.map.background, S(0), S(1));
+  CHECK(after.vertices.size() == before.vertices.size());
+  CHECK(!after.vertices.empty());
+  REQUIRE(ck.map.objects.size() == system.objects().size());
+  for (std::size_t k = 0; k < ck.map.objects.size(); ++k)
+    CHECK(marching_cubes(ck.map.objects[k]->volume(), S(0), S(1)).vertices.size() ==
+          marching_cubes(system.objects()[k]->volume(), S(0), S(1)).vertices.size());
+  // The saved voxels, not a dense dump: unobserved voxels compress away.
+  CHECK(emfusion::test::read_bytes(dir.file("a.emfckpt")).size() < system.memory_bytes() / 10);
+}
+
+TEST_CASE("Checkpoints: damaged, foreign, newer and mismatched checkpoints are refused", "[io][checkpoint]") {
+  using S = float;
+  const CheckpointScene<S> scene;
+  const emfusion::test::ScratchDir dir;
+  System<S> system(scene.camera, scene.params());
+  for (int i = 0; i < 2; ++i) scene.template feed<Host>(system, i);
+  const std::string good = dir.file("good.emfckpt");
+  save_checkpoint(good, system);
+  const std::string bytes = emfusion::test::read_bytes(good);
+  REQUIRE(bytes.size() > 100);
+
+  const std::string bad = dir.file("bad.emfckpt");
+  const auto refusal = [&](const std::string& content) {
+    emfusion::test::write_bytes(bad, content);
+    const std::string e = error_of([&] { (void)load_checkpoint<S>(bad); });
+    CHECK(contains(e, bad));
+    return e;
+  };
+  for (std::size_t n : {std::size_t(0), std::size_t(5), std::size_t(8), std::size_t(20), std::size_t(24),
+                        std::size_t(60), bytes.size() / 2, bytes.size() - 4, bytes.size() - 1})
+    CHECK(contains(refusal(bytes.substr(0, n)), n < 8 ? "not an emfusion checkpoint" : "truncated"));
+  CHECK(contains(refusal(bytes + "x"), "follow the checksum"));
+  for (std::size_t at : {std::size_t(30), bytes.size() / 3, bytes.size() - 10}) {
+    std::string flipped = bytes;
+    flipped[at] = char(flipped[at] ^ 0x10);
+    CHECK(contains(refusal(flipped), "checksum mismatch"));
+  }
+  std::string crc = bytes;  // the stored checksum itself damaged
+  crc.back() = char(crc.back() ^ 1);
+  CHECK(contains(refusal(crc), "checksum mismatch"));
+  std::string foreign = bytes;
+  foreign[0] = 'P';
+  CHECK(contains(refusal(foreign), "not an emfusion checkpoint"));
+  CHECK(contains(refusal("ply\nformat ascii 1.0\n"), "not an emfusion checkpoint"));
+  std::string newer = bytes;
+  newer[8] = char(checkpoint_version + 1);
+  CHECK(contains(refusal(newer), "version 2 is not supported"));
+  std::string odd_scalar = bytes;
+  odd_scalar[12] = 3;
+  CHECK(contains(refusal(odd_scalar), "unknown scalars"));
+  // A float checkpoint read as double.
+  const std::string e = error_of([&] { (void)load_checkpoint<double>(good); });
+  CHECK(contains(e, good));
+  CHECK(contains(e, "a checkpoint of float scalars"));
+  CHECK(contains(error_of([&] { (void)load_checkpoint<S>(dir.file("missing.emfckpt")); }), "missing.emfckpt"));
+
+  // A system of another camera or another background grid: refused, unchanged.
+  PinholeCamera<S> other_camera = scene.camera;
+  other_camera.fx = S(150);
+  System<S> other(other_camera, scene.params());
+  CHECK(contains(error_of([&] { restore_checkpoint(other, good); }), "saved with camera 160x120 fx 140"));
+  SystemParams<S> other_params = scene.params();
+  other_params.background_voxels = 64;
+  System<S> coarse(scene.camera, other_params);
+  const std::string grid = error_of([&] { restore_checkpoint(coarse, good); });
+  CHECK(contains(grid, good));
+  CHECK(contains(grid, "128x128x128 voxels"));
+  CHECK(coarse.frame_count() == 0);
+}
