@@ -38,6 +38,9 @@ import sys
 import time
 
 HERE = os.path.dirname(os.path.abspath(__file__))
+sys.path.insert(0, HERE)
+from there_and_back import read_list  # noqa: E402  (the text-list reader both scripts use)
+
 REPO = os.path.dirname(HERE)
 SHARED = os.path.normpath(os.path.join(REPO, '..', 'shared'))
 DYNGEN = os.path.join(SHARED, 'tools', 'dyngen.py')
@@ -152,16 +155,6 @@ def ensure_generator_packages():
 
 
 # ----------------------------------------------------------------------------- ground-truth labels
-
-def read_list(path):
-    rows = []
-    with open(path) as f:
-        for line in f:
-            line = line.strip()
-            if line and not line.startswith('#'):
-                rows.append(line.split())
-    return rows
-
 
 def inner_area(labels, k, border=BORDER):
     """Pixels of label k inside the image less a `border`-pixel border."""
