@@ -8,12 +8,18 @@
 //                [--max-frames N] [--voxels N] [--voxel-size M] [--stride N] [--tau T]
 //                [--integration paper|refined] [--behind-band F] [--silhouette-guard VOXELS]
 //                [--bilateral-radius R] [--central-gradient] [--depth-weight Z] [--store float|half]
-//                [--huber VOXELS] [--truncation VOXELS] [--integrate-filtered] [--verbose]
+//                [--huber VOXELS] [--truncation VOXELS] [--integrate-filtered]
+//                [--pyramid LEVELS] [--predict] [--retry] [--verbose]
 //
 // --store half keeps the volume's SDF and weight in 16 bits (core/half.hpp).
 // --huber and --truncation change the paper's 2 and 10 voxels;
 // --integrate-filtered fuses the bilateral-filtered depth instead of the raw
-// depth (as the authors' code does). docs/tracking.md has what each changed.
+// depth (as the authors' code does). --pyramid solves coarse to fine,
+// --predict starts at the constant-velocity prediction when the frame agrees
+// with it at least as well as with the last pose, --retry solves again from
+// the other start when a solve fails or moves beyond the system's per-frame
+// bound (slam/tracking.hpp, track_in_volume). docs/tracking.md has what each
+// changed.
 #include <chrono>
 #include <cstdio>
 #include <stdexcept>
@@ -24,6 +30,8 @@
 #include "emfusion/io/tum.hpp"
 #include "emfusion/preprocess/bilateral_filter.hpp"
 #include "emfusion/preprocess/vertex_map.hpp"
+#include "emfusion/slam/motion_prediction.hpp"
+#include "emfusion/slam/tracking.hpp"
 #include "emfusion/solve/sdf_alignment.hpp"
 #include "emfusion/volume/integrate.hpp"
 #include "support/args.hpp"
@@ -36,7 +44,8 @@ namespace {
 struct Options {
   std::string sequence, output, backend = "cpu";
   int max_frames = 0, voxels = 512, stride = 1;
-  bool verbose = false, central_gradient = false;
+  bool verbose = false, central_gradient = false, predict = false, retry = false;
+  int pyramid = 1;
   double voxel_size = 0.01;
   double tau = LevenbergMarquardtParams{}.tau;
   std::string integration = "paper";
@@ -68,6 +77,7 @@ void track(const Options& o) {
   align.pixel_stride = o.stride;
   align.central_gradient = o.central_gradient;
   align.depth_noise_reference = S(o.depth_weight);
+  align.pyramid_levels = o.pyramid;
   LevenbergMarquardtParams lm;
   lm.tau = o.tau;
   IntegrationParams<S> fusion = o.integration == "refined" ? IntegrationParams<S>::refined() : IntegrationParams<S>{};
@@ -80,6 +90,9 @@ void track(const Options& o) {
   Image<Vec3<S>, B> points;
   SE3<S> T_world_camera;
   Trajectory trajectory;
+  LinearizationCache<S, B> cache;
+  const MotionBound<S> bound{};  // the system's per-frame bound judges a solve for --retry
+  const SE3<S> T_world_volume = volume.pose(), T_volume_world = T_world_volume.inverse();
   double track_ms = 0, integrate_ms = 0;
   using clock = std::chrono::steady_clock;
   const auto ms_since = [&](clock::time_point t0) {
@@ -91,10 +104,24 @@ void track(const Options& o) {
     auto t0 = clock::now();
     bilateral_filter(depth, filtered, bilateral);
     back_project(filtered, camera, points);
-    SolveReport report;
-    if (i > 0)
-      T_world_camera = align_to_volume(volume, points, static_cast<const Image<S, B>*>(nullptr), T_world_camera,
-                                       huber, align, lm, &report);
+    PoseTrack t;
+    if (i > 0) {
+      PoseStarts<S> starts{T_volume_world * T_world_camera, std::nullopt};
+      if (o.predict && i > 1)
+        starts.predicted =
+            T_volume_world * constant_velocity(trajectory[std::size_t(i) - 2], trajectory.back(), seq.timestamp(i))
+                                 .template cast<S>();
+      const auto judge = [&](const SE3<S>& T_volume_camera, PoseTrack& track) {
+        const SE3<S> T = T_world_volume * T_volume_camera;
+        track.step = step_between(T_world_camera, T);
+        track.outcome = tracking_outcome(track.report, 100.0, T, track.step, bound);
+      };
+      // As before these switches existed, every solve that converged is taken.
+      T_world_camera = T_world_volume * track_in_volume(volume, points, static_cast<const Image<S, B>*>(nullptr),
+                                                        starts, huber, align, LevenbergMarquardt{lm}, o.retry, judge,
+                                                        t, cache, backend);
+    }
+    const SolveReport& report = t.report;
     track_ms += ms_since(t0);
     t0 = clock::now();
     integrate(volume, o.integrate_filtered ? filtered : depth, camera, T_world_camera, static_cast<const Image<S, B>*>(nullptr), fusion);
@@ -113,12 +140,15 @@ void track(const Options& o) {
 Options parse(int argc, char** argv) {
   Options o;
   const auto switches = {std::string("--verbose"), std::string("--central-gradient"),
-                         std::string("--integrate-filtered")};
+                         std::string("--integrate-filtered"), std::string("--predict"), std::string("--retry")};
   const auto positional = examples::parse_command_line(argc, argv, switches, [&](const std::string& a,
                                                                                   const std::string& v) {
     if (a == "--verbose") o.verbose = true;
     else if (a == "--central-gradient") o.central_gradient = true;
     else if (a == "--integrate-filtered") o.integrate_filtered = true;
+    else if (a == "--predict") o.predict = true;
+    else if (a == "--retry") o.retry = true;
+    else if (a == "--pyramid") o.pyramid = examples::parse_int(a, v, 1, 6);
     else if (a == "--backend") o.backend = v;
     else if (a == "--max-frames") o.max_frames = examples::parse_positive_int(a, v);
     else if (a == "--voxels") o.voxels = examples::parse_positive_int(a, v, 2048);
@@ -146,7 +176,8 @@ Options parse(int argc, char** argv) {
                                 "[--max-frames N] [--voxels N] [--voxel-size M] [--stride N] [--tau T] "
                                 "[--integration paper|refined] [--behind-band F] [--silhouette-guard G] "
                                 "[--bilateral-radius R] [--depth-weight Z] [--central-gradient] [--store float|half] "
-                                "[--huber VOXELS] [--truncation VOXELS] [--integrate-filtered] [--verbose]");
+                                "[--huber VOXELS] [--truncation VOXELS] [--integrate-filtered] "
+                                "[--pyramid LEVELS] [--predict] [--retry] [--verbose]");
   o.sequence = positional[0], o.output = positional[1];
   return o;
 }

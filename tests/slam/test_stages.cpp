@@ -313,3 +313,78 @@ TEMPLATE_LIST_TEST_CASE("The paper's parts given explicitly are the default syst
   REQUIRE(explicit_parts.objects().size() == 1);
   CHECK(max_abs_diff(by_default.objects()[0]->pose().matrix(), explicit_parts.objects()[0]->pose().matrix()) == S(0));
 }
+
+TEMPLATE_LIST_TEST_CASE("Stages alone: tracking from a motion prediction, the retry, a refused solve", "[slam]",
+                        emfusion::test::AllConfigs) {
+  using S = typename TestType::Scalar;
+  using B = typename TestType::Backend;
+  OneFrameMap<S, B> m;
+  PaperLikelihood<S> likelihood;
+  likelihood.params = m.s.params.likelihood;
+  SystemParams<S> params = m.s.params;
+  params.predict_motion = true;
+  params.pyramid_levels = 2;
+  // The camera moved 2 cm per frame along x; now it is at 4.2 cm.
+  const auto at_x = [](double x) { return SE3<S>::translation(vec3(S(x), S(0), S(0))); };
+  m.map.camera_trajectory = {{0.0, at_x(0.0).template cast<double>()}, {0.1, at_x(0.02).template cast<double>()}};
+  m.map.T_world_camera = at_x(0.02);
+  const SE3<S> truth = at_x(0.042);
+  const auto apart = [](const Vec3<S>& a, const Vec3<S>& b) { return double(norm(a - b)); };
+  TrackingWorkspace<S, B>* const no_workspace = nullptr;
+  const PoseStarts<S> starts = predict_camera(m.map, 0.2, params);
+  REQUIRE(starts.predicted);
+  CHECK(double(norm(starts.predicted->translation() - vec3(S(0.04), S(0), S(0)))) < 1e-6);
+  CHECK(apart(m.map.T_world_camera.translation(), starts.predicted->translation()) == 0);  // the E-step associates there
+  preprocess(m.s.template depth<B>(truth), m.s.camera, params, m.frame);
+  associate(m.map, m.frame, likelihood, params);
+  const PoseTrack camera = track_camera(m.map, m.frame, params, HuberNorm<S>{S(2)}, LevenbergMarquardt{}, no_workspace, &starts);
+  CHECK(camera.outcome == TrackingOutcome::tracked);
+  CHECK(camera.from_prediction);
+  CHECK(camera.attempts == 1);
+  CHECK(double(norm(m.map.T_world_camera.translation() - truth.translation())) < 0.004);
+  CHECK(std::abs(camera.step.translation - 0.022) < 0.004);  // from the previous pose, not the prediction
+
+  // A refused solve leaves the previous pose, not the prediction.
+  SystemParams<S> strict = params;
+  strict.min_camera_terms = 1 << 30;
+  m.map.T_world_camera = *starts.predicted;
+  const PoseTrack refused =
+      track_camera(m.map, m.frame, strict, HuberNorm<S>{S(2)}, LevenbergMarquardt{}, no_workspace, &starts);
+  CHECK(refused.outcome == TrackingOutcome::too_few_terms);
+  CHECK(apart(m.map.T_world_camera.translation(), starts.previous.translation()) == 0);
+
+  // The retry: a first solve judged failed is run again from the other start.
+  const SE3<S> T_volume_world = m.map.background.pose().inverse();
+  const PoseStarts<S> in_volume{T_volume_world * starts.previous, T_volume_world * *starts.predicted};
+  const auto fail_from_prediction = [](const SE3<S>&, PoseTrack& t) {
+    t.outcome = t.from_prediction ? TrackingOutcome::solve_failed : TrackingOutcome::tracked;
+  };
+  LinearizationCache<S, B> cache;
+  const SdfAlignmentParams<S> align = alignment_params(params, params.background_integration.max_weight);
+  const auto norm_in_voxels = scaled_norm(HuberNorm<S>{S(2)}, m.map.background.voxel_size());
+  for (const bool retry : {false, true}) {
+    PoseTrack t;
+    track_in_volume(m.map.background, m.frame.points, &m.frame.associations.image(0), in_volume, norm_in_voxels,
+                    align, LevenbergMarquardt{}, retry, fail_from_prediction, t, cache, m.map.background.backend());
+    CHECK(t.attempts == (retry ? 2 : 1));
+    CHECK(t.from_prediction == !retry);
+    CHECK(t.outcome == (retry ? TrackingOutcome::tracked : TrackingOutcome::solve_failed));
+  }
+
+  // Objects are predicted only from poses of the two frames before.
+  ObjectModel<S, B>& object = *m.map.objects[0];
+  const SE3<double> P1 = object.pose().template cast<double>();
+  const SE3<double> P0 = SE3<double>::translation(vec3(0.0, -0.01, 0.0)) * P1;
+  ObjectRecord& record = m.map.record_of(object.id());
+  record.trajectory = {{0.0, P0}, {0.1, P1}};
+  const std::vector<PoseStarts<S>> predicted = predict_objects(m.map, 0.2, params);
+  REQUIRE(predicted.size() == 1);
+  REQUIRE(predicted[0].predicted);
+  CHECK(double(norm(object.pose().translation() - P1.template cast<S>().translation() - vec3(S(0), S(0.01), S(0)))) <
+        1e-5);
+  object.set_pose(P1.template cast<S>());
+  record.trajectory = {{0.05, P0}, {0.1, P1}};  // not the frame before: no prediction
+  const std::vector<PoseStarts<S>> none = predict_objects(m.map, 0.2, params);
+  CHECK_FALSE(none[0].predicted);
+  CHECK(apart(object.pose().translation(), P1.template cast<S>().translation()) == 0);
+}

@@ -233,3 +233,60 @@ TEMPLATE_LIST_TEST_CASE("positive_box bounds the positive pixels; boxed terms ch
     for (int i = 0; i < 21; ++i) CHECK(b.H[i] == Approx(a.H[i]).epsilon(1e-9).margin(1e-12));
   }
 }
+
+TEMPLATE_LIST_TEST_CASE("Coarse-to-fine alignment: the same pose as one level, most iterations on coarse levels",
+                        "[solve]", emfusion::test::AllConfigs) {
+  using S = typename TestType::Scalar;
+  using B = typename TestType::Backend;
+  const auto volume = test::fused_room<S, B>();
+  const SE3<S> truth = SE3<S>::exp(Vec6<S>{{S(0.03), S(-0.02), S(0.04), S(0.02), S(-0.03), S(0.01)}});
+  const auto points = test::room_points<S, B>(truth);
+  const HuberNorm<S> huber{S(2) * volume.voxel_size()};
+  const auto* none = static_cast<const Image<S, B>*>(nullptr);
+  SdfAlignmentParams<S> one, three;
+  three.pyramid_levels = 3;
+  for (const auto& offset : offsets<S>()) {
+    const SE3<S> start = SE3<S>::exp(offset) * truth;
+    SolveReport r1, r3;
+    LevenbergMarquardtParams lm;
+    lm.tau = 1e-3;
+    const SE3<S> single = align_to_volume(volume, points, none, start, huber, one, lm, &r1);
+    const SE3<S> pyramid = align_to_volume(volume, points, none, start, huber, three, lm, &r3);
+    const PoseError e = pose_error(pyramid, truth), between = pose_error(pyramid, single);
+    INFO("offset " << offset[0] << " " << offset[1] << " " << offset[2] << ": " << e.translation * 1000 << " mm, "
+                   << e.rotation << " deg after " << r3.iterations << " iterations over three levels ("
+                   << r1.iterations << " on one), " << to_string(r3.reason) << " vs " << to_string(r1.reason)
+                   << "; one level " << pose_error(single, truth).translation * 1000 << " mm");
+    CHECK(r3.converged());
+    CHECK(e.translation < 1e-3);
+    CHECK(e.rotation < 0.1);
+    CHECK(between.translation < 5e-4);
+    // The report is the finest level's, with every level's iterations.
+    CHECK(r3.iterations >= r3.accepted_steps);
+    CHECK(r3.terms > 0.5 * r1.terms);
+  }
+}
+
+TEMPLATE_LIST_TEST_CASE("A start the frame agrees with better is preferred; pyramid levels are validated", "[solve]",
+                        emfusion::test::AllConfigs) {
+  using S = typename TestType::Scalar;
+  using B = typename TestType::Backend;
+  const auto volume = test::fused_room<S, B>();
+  const SE3<S> truth = SE3<S>::exp(Vec6<S>{{S(0.03), S(-0.02), S(0.04), S(0.02), S(-0.03), S(0.01)}});
+  const auto points = test::room_points<S, B>(truth);
+  const HuberNorm<S> huber{S(2) * volume.voxel_size()};
+  SdfAlignmentParams<S> params;
+  params.pyramid_levels = 2;
+  const auto terms = sdf_alignment_in_box(volume, points, static_cast<const Image<S, B>*>(nullptr), params,
+                                          volume.backend());
+  const SE3<S> T_true = volume.pose().inverse() * truth;
+  const SE3<S> off = SE3<S>::exp(Vec6<S>{{S(0.04), S(0), S(-0.03), S(0), S(0.03), S(0)}}) * T_true;
+  CHECK(agrees_at_least_as_well(volume.backend(), terms, huber, params, T_true, off));
+  CHECK_FALSE(agrees_at_least_as_well(volume.backend(), terms, huber, params, off, T_true));
+  CHECK(at_level(terms, params, 1).stride == 2);
+
+  SdfAlignmentParams<S> bad;
+  bad.pyramid_levels = 0;
+  CHECK_THROWS_WITH(make_sdf_alignment(volume, points, static_cast<const Image<S, B>*>(nullptr), bad),
+                    EMF_CONTAINS("pyramid_levels must be in 1..6"));
+}

@@ -67,6 +67,8 @@ struct PoseTrack {
   TrackingOutcome outcome = TrackingOutcome::not_tracked;
   PoseStep step;
   SolveReport report;
+  bool from_prediction = false;  ///< the solve taken started at the motion prediction
+  int attempts = 0;              ///< solves run: 2 when the first was not tracked and was retried
 };
 
 /// The pixels of the depth image a frame received, by kind. Only `valid`

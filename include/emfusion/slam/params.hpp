@@ -65,6 +65,17 @@ struct SystemParams {
   /// the iterations (docs/decisions.md). LevenbergMarquardtParams{} is the reference.
   LevenbergMarquardtParams lm = fast_lm();
   int pixel_stride = 1;          ///< use every n-th pixel in x and y when tracking
+  /// Coarse-to-fine levels of every pose solve (SdfAlignmentParams::
+  /// pyramid_levels): level l takes every (pixel_stride * 2^l)-th pixel; 1:
+  /// the paper's single level.
+  int pyramid_levels = 1;
+  /// Start the camera's and every object's solve at its constant-velocity
+  /// prediction (slam/motion_prediction.hpp) when the frame agrees with it at
+  /// least as well as with the last pose, and associate the frame there.
+  bool predict_motion = false;
+  /// A solve whose outcome is not `tracked` is run again from the other
+  /// start (the last pose when it began at the prediction, or the reverse).
+  bool retry_tracking = false;
   /// Depth-noise weighting of tracking terms (SdfAlignmentParams): 0 = off.
   S depth_noise_reference = S(0);
   /// An object whose alignment has fewer terms keeps its previous pose.
@@ -171,6 +182,7 @@ struct SystemParams {
                     w, "motion bounds must be positive (infinity: no bound)");
     detail::require(huber_voxels > S(0), w, "huber_voxels must be positive");
     detail::require(pixel_stride >= 1, w, "pixel_stride must be at least 1");
+    detail::require(pyramid_levels >= 1 && pyramid_levels <= 6, w, "pyramid_levels must be in 1..6");
     detail::require(depth_noise_reference >= S(0), w, "depth_noise_reference must not be negative");
     detail::require(likelihood.sigma > S(0) && likelihood.alpha >= S(0) && likelihood.alpha <= S(1) &&
                         likelihood.p_uniform >= S(0),

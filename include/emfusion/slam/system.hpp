@@ -107,7 +107,7 @@ class System {
     // first camera defines the world).
     const bool starts_map = !map_.started && result.depth.valid >= std::max(params_.min_camera_terms, 1);
     frame_.object_tracks.assign(map_.objects.size(), PoseTrack{});
-    if (map_.started) track(result, clock);
+    if (map_.started) track(result, timestamp, clock);
     result.mapped = starts_map || result.camera_tracking == TrackingOutcome::tracked;
     render_models(map_, frame_, camera_, params_, render_workspace_);
     result.times.raycast = clock.lap();
@@ -202,24 +202,27 @@ class System {
     clock::time_point start, last;
   };
 
-  /// Stages 2 and 3: the E-step at the previous poses, the camera, then (if
-  /// it was tracked) the E-step again and every object, and the E-step at
-  /// the final poses, which mapping and the deletion rules use.
-  void track(FrameResult& result, Clock& clock) {
+  /// Stages 2 and 3: the E-step at the predicted camera pose (the previous
+  /// one without motion prediction), the camera, then (if it was tracked)
+  /// the E-step again at the objects' predicted poses and every object, and
+  /// the E-step at the final poses, which mapping and the deletion rules use.
+  void track(FrameResult& result, double timestamp, Clock& clock) {
+    const PoseStarts<S> camera_starts = predict_camera(map_, timestamp, params_);
     associate(map_, frame_, parts_.likelihood, params_);
     result.times.e_step += clock.lap();
-    const PoseTrack camera =
-        track_camera(map_, frame_, params_, parts_.background_norm, parts_.solver, &tracking_workspace_);
+    const PoseTrack camera = track_camera(map_, frame_, params_, parts_.background_norm, parts_.solver,
+                                          &tracking_workspace_, &camera_starts);
     result.camera = camera.report;
     result.camera_tracking = camera.outcome;
     result.camera_step = camera.step;
     result.times.track_background = clock.lap();
     if (camera.outcome != TrackingOutcome::tracked) return;  // the associations stay those at the previous poses
     if (!map_.objects.empty()) {
+      const std::vector<PoseStarts<S>> object_starts = predict_objects(map_, timestamp, params_);
       associate(map_, frame_, parts_.likelihood, params_);
       result.times.e_step += clock.lap();
-      frame_.object_tracks =
-          track_objects(map_, frame_, params_, parts_.object_norm, parts_.solver, &tracking_workspace_);
+      frame_.object_tracks = track_objects(map_, frame_, params_, parts_.object_norm, parts_.solver,
+                                           &tracking_workspace_, &object_starts);
       for (const PoseTrack& t : frame_.object_tracks) result.objects.push_back(t.report);
       result.times.track_objects = clock.lap();
     }

@@ -1,15 +1,20 @@
 // Stage 3 of the EM-Fusion frame, the M-step for the poses (paper eq. 8/9):
 // the camera against the background, then every object against the frame,
 // each a direct SDF alignment weighted by its association image, the map's
-// confidence and a robust norm, minimised by a PoseSolver. A solved pose is
-// taken only if the solve converged with enough terms and moved less than
-// the per-frame bound (docs/system.md, "Hostile input"); otherwise the pose
-// stays and the outcome says why.
+// confidence and a robust norm, minimised by a PoseSolver, coarse to fine
+// over SystemParams::pyramid_levels. A solve starts at the last pose or at
+// its motion prediction (predict_camera, predict_objects), whichever the
+// frame agrees with better. A solved pose is taken only if the solve
+// converged with enough terms and moved less than the per-frame bound
+// (docs/system.md, "Hostile input"); otherwise it is solved once more from
+// the other start (retry_tracking), and failing that the last pose stays
+// and the outcome says why.
 #pragma once
 
 #include <cmath>
 #include <cstddef>
 #include <future>
+#include <optional>
 #include <vector>
 
 #include "emfusion/core/parallel.hpp"
@@ -18,6 +23,7 @@
 #include "emfusion/slam/frame.hpp"
 #include "emfusion/slam/frame_result.hpp"
 #include "emfusion/slam/map.hpp"
+#include "emfusion/slam/motion_prediction.hpp"
 #include "emfusion/slam/params.hpp"
 #include "emfusion/solve/sdf_alignment.hpp"
 #include "emfusion/solve/solvers.hpp"
@@ -73,59 +79,170 @@ SdfAlignmentParams<S> alignment_params(const SystemParams<S>& params, S max_weig
   a.use_map_confidence = params.use_map_confidence;
   a.confidence_normalizer = max_weight;
   a.pixel_stride = params.pixel_stride;
+  a.pyramid_levels = params.pyramid_levels;
   a.depth_noise_reference = params.depth_noise_reference;
   return a;
 }
 
-/// Tracks the camera against the background from map.T_world_camera with
-/// frame.points weighted by frame.associations.image(0); moves
-/// map.T_world_camera when the outcome is `tracked`. `norm` is in voxels of
-/// the background (scaled_norm).
+/// Where a pose's solve may start: the pose of the last frame and, with
+/// motion prediction, where the pose is expected now.
+template <class S>
+struct PoseStarts {
+  SE3<S> previous;
+  std::optional<SE3<S>> predicted;
+};
+
+/// Solves one SDF alignment in `volume` (poses are T_volume_camera) from
+/// `starts`: from the prediction when the frame agrees with it at least as
+/// well as with the previous pose (agrees_at_least_as_well), else from the
+/// previous pose; with `retry`, once more from the other start when
+/// `judge(T, track)` (which fills track.step and track.outcome from
+/// track.report) does not find the first solve `tracked`. Returns the pose
+/// of the solve taken (the retry's if it was tracked, else the first's) and
+/// fills `track`.
+template <class S, Backend B, class Store, class Norm, class Solver, class Judge>
+  requires RobustNorm<Norm, S> && PoseSolver<Solver, S>
+SE3<S> track_in_volume(const TsdfVolume<S, B, Store>& volume, const Image<Vec3<S>, B>& points,
+                       const Image<S, B>* association, const PoseStarts<S>& starts, const Norm& norm,
+                       const SdfAlignmentParams<S>& align, const Solver& solver, bool retry, Judge&& judge,
+                       PoseTrack& track, LinearizationCache<S, B>& cache, const B& backend) {
+  const SdfAlignmentTerms<S, Store> terms = sdf_alignment_in_box(volume, points, association, align, backend);
+  const bool predicted_first =
+      starts.predicted && agrees_at_least_as_well(backend, terms, norm, align, *starts.predicted, starts.previous);
+  const auto solve_from = [&](bool from_prediction, PoseTrack& t) {
+    t.from_prediction = from_prediction;
+    const SE3<S> T = solve_coarse_to_fine(backend, terms, norm, align, solver,
+                                          from_prediction ? *starts.predicted : starts.previous, &t.report, cache);
+    judge(T, t);
+    return T;
+  };
+  SE3<S> T = solve_from(predicted_first, track);
+  track.attempts = 1;
+  if (retry && starts.predicted && track.outcome != TrackingOutcome::tracked) {
+    PoseTrack second;
+    const SE3<S> T_second = solve_from(!predicted_first, second);
+    if (second.outcome == TrackingOutcome::tracked) T = T_second, track = second;
+    track.attempts = 2;
+  }
+  return T;
+}
+
+/// Moves map.T_world_camera to its constant-velocity prediction at
+/// `timestamp` (when SystemParams::predict_motion is on and the last two
+/// frames have poses), so that the E-step associates the frame there;
+/// returns the starts for track_camera.
+template <class S, Backend B>
+PoseStarts<S> predict_camera(Map<S, B>& map, double timestamp, const SystemParams<S>& params) {
+  PoseStarts<S> starts{map.T_world_camera, std::nullopt};
+  const Trajectory& t = map.camera_trajectory;
+  if (!params.predict_motion || t.size() < 2) return starts;
+  const SE3<S> predicted =
+      constant_velocity(t[t.size() - 2], t.back(), timestamp).template cast<S>();
+  if (!is_finite(predicted)) return starts;
+  starts.predicted = predicted;
+  map.T_world_camera = predicted;
+  return starts;
+}
+
+/// Moves every live object that was tracked in the last two frames to its
+/// constant-velocity prediction at `timestamp` (when predict_motion is on),
+/// for the E-step; returns the starts for track_objects, in Map::objects
+/// order.
+template <class S, Backend B>
+std::vector<PoseStarts<S>> predict_objects(Map<S, B>& map, double timestamp, const SystemParams<S>& params) {
+  std::vector<PoseStarts<S>> starts;
+  const Trajectory& camera = map.camera_trajectory;
+  for (auto& o : map.objects) {
+    starts.push_back({o->pose(), std::nullopt});
+    if (!params.predict_motion || camera.size() < 2) continue;
+    const std::optional<SE3<double>> p = predict_pose(map.record_of(o->id()).trajectory,
+                                                      camera[camera.size() - 2].timestamp, camera.back().timestamp,
+                                                      timestamp);
+    if (!p || !is_finite(p->template cast<S>())) continue;
+    starts.back().predicted = p->template cast<S>();
+    o->set_pose(*starts.back().predicted);
+  }
+  return starts;
+}
+
+/// Tracks the camera against the background with frame.points weighted by
+/// frame.associations.image(0), from `starts` (predict_camera; without
+/// them, from map.T_world_camera); sets map.T_world_camera to the solved
+/// pose when the outcome is `tracked`, else to the previous pose. `norm` is
+/// in voxels of the background (scaled_norm).
 template <class S, Backend B, class Norm, class Solver>
   requires RobustNorm<Norm, S> && PoseSolver<Solver, S>
 PoseTrack track_camera(Map<S, B>& map, const Frame<S, B>& frame, const SystemParams<S>& params, const Norm& norm,
-                       const Solver& solver, TrackingWorkspace<S, B>* workspace = nullptr) {
+                       const Solver& solver, TrackingWorkspace<S, B>* workspace = nullptr,
+                       const PoseStarts<S>* starts = nullptr) {
+  const PoseStarts<S> from = starts ? *starts : PoseStarts<S>{map.T_world_camera, std::nullopt};
+  const SE3<S>& T_world_volume = map.background.pose();
+  const SE3<S> T_volume_world = T_world_volume.inverse();
+  PoseStarts<S> in_volume{T_volume_world * from.previous, std::nullopt};
+  if (from.predicted) in_volume.predicted = T_volume_world * *from.predicted;
+  const auto judge = [&](const SE3<S>& T_volume_camera, PoseTrack& t) {
+    const SE3<S> T = T_world_volume * T_volume_camera;
+    t.step = step_between(from.previous, T);
+    t.outcome = tracking_outcome(t.report, double(params.min_camera_terms), T, t.step, params.max_camera_motion);
+  };
   PoseTrack t;
-  const SE3<S> T_solved =
-      align_to_volume(map.background, frame.points, &frame.associations.image(0), map.T_world_camera,
+  LinearizationCache<S, B> local;
+  const SE3<S> T_volume_camera =
+      track_in_volume(map.background, frame.points, &frame.associations.image(0), in_volume,
                       scaled_norm(norm, map.background.voxel_size()),
-                      alignment_params(params, params.background_integration.max_weight), solver, &t.report,
-                      workspace ? &workspace->camera_cache : nullptr);
-  t.step = step_between(map.T_world_camera, T_solved);
-  t.outcome = tracking_outcome(t.report, double(params.min_camera_terms), T_solved, t.step, params.max_camera_motion);
-  if (t.outcome == TrackingOutcome::tracked) map.T_world_camera = T_solved;
+                      alignment_params(params, params.background_integration.max_weight), solver,
+                      params.retry_tracking, judge, t, workspace ? workspace->camera_cache : local,
+                      map.background.backend());
+  map.T_world_camera = t.outcome == TrackingOutcome::tracked ? T_world_volume * T_volume_camera : from.previous;
   return t;
 }
 
-/// Tracks every live object from its pose with the camera at
-/// map.T_world_camera, object k's terms weighted by
-/// frame.associations.image(k + 1); moves the objects whose outcome is
-/// `tracked`. Returns one PoseTrack per object, in Map::objects order. `norm`
-/// is in voxels of each object. Each solve is independent of the others':
-/// on CUDA they run from host threads on streams of their own, so that
-/// their small kernels and the host's solver steps overlap; the poses are
-/// applied afterwards in object order.
+/// Tracks every live object with the camera at map.T_world_camera, object
+/// k's terms weighted by frame.associations.image(k + 1), from `starts`
+/// (predict_objects; without them, from the objects' poses); sets each
+/// object's pose to the solved one when its outcome is `tracked`, else to
+/// its previous pose. Returns one PoseTrack per object, in Map::objects
+/// order. `norm` is in voxels of each object. Each solve is independent of
+/// the others': on CUDA they run from host threads on streams of their own,
+/// so that their small kernels and the host's solver steps overlap; the
+/// poses are applied afterwards in object order.
 template <class S, Backend B, class Norm, class Solver>
   requires RobustNorm<Norm, S> && PoseSolver<Solver, S>
 std::vector<PoseTrack> track_objects(Map<S, B>& map, const Frame<S, B>& frame, const SystemParams<S>& params,
                                      const Norm& norm, const Solver& solver,
-                                     TrackingWorkspace<S, B>* workspace = nullptr) {
+                                     TrackingWorkspace<S, B>* workspace = nullptr,
+                                     const std::vector<PoseStarts<S>>* starts = nullptr) {
   const std::size_t n = map.objects.size();
+  detail::require(!starts || starts->size() == n, "track_objects", "need one PoseStarts per live object");
   TrackingWorkspace<S, B> local;
   TrackingWorkspace<S, B>& ws = workspace ? *workspace : local;
   ws.object_caches.resize(n);
   const SdfAlignmentParams<S> align = alignment_params(params, params.object_integration.max_weight);
   const B& backend = frame.points.backend();
   std::vector<PoseTrack> tracks(n);
-  std::vector<SE3<S>> T_volume_camera(n);
+  std::vector<SE3<S>> T_world_object(n);
   const auto solve = [&](std::size_t k, const B& run_on) {
     const ObjectModel<S, B>& o = *map.objects[k];
-    // The object starts where it was; the solver finds how it moved
-    // relative to the camera.
-    T_volume_camera[k] = align_in_volume(o.volume(), frame.points, &frame.associations.image(int(k) + 1),
-                                         o.volume().pose().inverse() * map.T_world_camera,
-                                         scaled_norm(norm, o.volume().voxel_size()), align, solver,
-                                         &tracks[k].report, &ws.object_caches[k], &run_on);
+    const PoseStarts<S> from = starts ? (*starts)[k] : PoseStarts<S>{o.pose(), std::nullopt};
+    // The solver finds the camera in the object's volume: T_volume_camera
+    // of a world pose T_world_object.
+    const SE3<S> T_object_volume = o.T_object_volume();
+    const auto in_volume = [&](const SE3<S>& T_wo) { return (T_wo * T_object_volume).inverse() * map.T_world_camera; };
+    const auto to_world = [&](const SE3<S>& T_vc) {
+      return map.T_world_camera * T_vc.inverse() * T_object_volume.inverse();
+    };
+    PoseStarts<S> volume_starts{in_volume(from.previous), std::nullopt};
+    if (from.predicted) volume_starts.predicted = in_volume(*from.predicted);
+    const auto judge = [&](const SE3<S>& T_volume_camera, PoseTrack& t) {
+      const SE3<S> T = to_world(T_volume_camera);
+      t.step = step_between(from.previous, T);
+      t.outcome = tracking_outcome(t.report, double(params.min_object_terms), T, t.step, params.max_object_motion);
+    };
+    const SE3<S> T_volume_camera =
+        track_in_volume(o.volume(), frame.points, &frame.associations.image(int(k) + 1), volume_starts,
+                        scaled_norm(norm, o.volume().voxel_size()), align, solver, params.retry_tracking, judge,
+                        tracks[k], ws.object_caches[k], run_on);
+    T_world_object[k] = tracks[k].outcome == TrackingOutcome::tracked ? to_world(T_volume_camera) : from.previous;
   };
   if (ConcurrentLanes<B>::concurrent && n > 1) {
     std::vector<B> lanes;
@@ -136,15 +253,7 @@ std::vector<PoseTrack> track_objects(Map<S, B>& map, const Frame<S, B>& frame, c
   } else {
     for (std::size_t k = 0; k < n; ++k) solve(k, backend);
   }
-  for (std::size_t k = 0; k < n; ++k) {
-    ObjectModel<S, B>& o = *map.objects[k];
-    const SE3<S> T_world_object = map.T_world_camera * T_volume_camera[k].inverse() * o.T_object_volume().inverse();
-    PoseTrack& t = tracks[k];
-    t.step = step_between(o.pose(), T_world_object);
-    t.outcome = tracking_outcome(t.report, double(params.min_object_terms), T_world_object, t.step,
-                                 params.max_object_motion);
-    if (t.outcome == TrackingOutcome::tracked) o.set_pose(T_world_object);
-  }
+  for (std::size_t k = 0; k < n; ++k) map.objects[k]->set_pose(T_world_object[k]);
   return tracks;
 }
 

@@ -29,6 +29,12 @@ struct SdfAlignmentParams {
   /// which equals W_max once the map is mature).
   S confidence_normalizer = S(64);
   int pixel_stride = 1;  ///< use every n-th pixel in x and y
+  /// Coarse-to-fine levels: the solve runs on level L-1 first and on level 0
+  /// last, level l taking every (pixel_stride * 2^l)-th pixel of the
+  /// bilateral-filtered frame in x and y (a decimation pyramid: no images of
+  /// its own, and each term keeps its pixel's association and map
+  /// confidence). 1: one level, the paper's solve.
+  int pyramid_levels = 1;
   /// Jacobian from the SDF gradient by central differences one voxel apart
   /// (smoother across voxel cells, six more samples per pixel) instead of the
   /// exact gradient of the trilinear interpolant.
@@ -156,6 +162,7 @@ SdfAlignmentTerms<S, Store> make_sdf_alignment(const TsdfVolume<S, B, Store>& vo
   if (params.use_association && association)
     detail::require_image(association->view(), points.width(), points.height(), where, "association image");
   detail::require(params.pixel_stride >= 1, where, "pixel_stride must be at least 1");
+  detail::require(params.pyramid_levels >= 1 && params.pyramid_levels <= 6, where, "pyramid_levels must be in 1..6");
   detail::require(!params.use_map_confidence || params.confidence_normalizer > S(0), where,
                   "confidence_normalizer must be positive");
   SdfAlignmentTerms<S, Store> t;
@@ -169,36 +176,100 @@ SdfAlignmentTerms<S, Store> make_sdf_alignment(const TsdfVolume<S, B, Store>& vo
   return t;
 }
 
+/// The terms of make_sdf_alignment restricted to the pixels where the
+/// association is positive (positive_box, computed on `backend`): an
+/// object's association is zero outside the few pixels it covers, so its
+/// solve skips the rest in every iteration.
+template <class S, Backend B, class Store>
+SdfAlignmentTerms<S, Store> sdf_alignment_in_box(const TsdfVolume<S, B, Store>& volume,
+                                                 const Image<Vec3<S>, B>& points, const Image<S, B>* association,
+                                                 const SdfAlignmentParams<S>& params, const B& backend) {
+  SdfAlignmentTerms<S, Store> terms = make_sdf_alignment(volume, points, association, params);
+  if (!terms.association.empty()) {
+    terms.box = positive_box(backend, *association);
+    if (terms.box.empty()) terms.box = PixelBox{0, 0, 1, 1};  // no term at all; one pixel, q = 0
+  }
+  return terms;
+}
+
+/// `terms` at coarse-to-fine level `level` of `params` (every
+/// (pixel_stride * 2^level)-th pixel).
+template <class S, class Store>
+SdfAlignmentTerms<S, Store> at_level(SdfAlignmentTerms<S, Store> terms, const SdfAlignmentParams<S>& params,
+                                     int level) {
+  terms.stride = params.pixel_stride << level;
+  return terms;
+}
+
+/// Minimises the robust cost of `terms` with `solver` from `start`, coarse to
+/// fine over params.pyramid_levels levels, each level starting where the
+/// coarser one stopped. The report is the finest level's, with the
+/// iterations and accepted steps of all levels added up. `values` is reset
+/// for every level (the terms change with it).
+template <class S, Backend B, class Store, class Norm, class Solver>
+  requires RobustNorm<Norm, S> && PoseSolver<Solver, S>
+SE3<S> solve_coarse_to_fine(const B& backend, const SdfAlignmentTerms<S, Store>& terms, const Norm& norm,
+                            const SdfAlignmentParams<S>& params, const Solver& solver, const SE3<S>& start,
+                            SolveReport* report, LinearizationCache<S, B>& values) {
+  SE3<S> T = start;
+  int iterations = 0, accepted = 0;
+  SolveReport level_report;
+  for (int level = params.pyramid_levels - 1; level >= 0; --level) {
+    const SdfAlignmentTerms<S, Store> level_terms = at_level(terms, params, level);
+    values.reset();
+    const auto lin = [&](const SE3<S>& pose, const SE3<S>* reference) {
+      return linearize(backend, level_terms, norm, pose, reference, values);
+    };
+    level_report = SolveReport{};
+    const SE3<S> solved = solver.solve(lin, T, &level_report);
+    iterations += level_report.iterations, accepted += level_report.accepted_steps;
+    // A coarse level without a solution (too few terms at its spacing)
+    // hands on its start: the finer level decides.
+    if (level == 0 || level_report.converged()) T = solved;
+  }
+  level_report.iterations = iterations, level_report.accepted_steps = accepted;
+  if (report) *report = level_report;
+  return T;
+}
+
+/// Whether the frame agrees at least as well with `candidate` as with
+/// `fallback` (e.g. a motion prediction and the previous pose): at the
+/// coarsest level of `params`, the robust cost over the terms valid at both
+/// poses is not higher at `candidate`, and at least as many terms are valid
+/// there (within 10 %: a pose that moves the points off the map loses terms,
+/// not cost). Two linearisations at the coarsest level.
+template <class S, Backend B, class Store, class Norm>
+  requires RobustNorm<Norm, S>
+bool agrees_at_least_as_well(const B& backend, const SdfAlignmentTerms<S, Store>& terms, const Norm& norm,
+                             const SdfAlignmentParams<S>& params, const SE3<S>& candidate, const SE3<S>& fallback) {
+  const SdfAlignmentTerms<S, Store> coarse = at_level(terms, params, params.pyramid_levels - 1);
+  const NormalEquations6 at_candidate = linearize(backend, coarse, norm, candidate, &fallback);
+  const NormalEquations6 at_fallback = linearize(backend, coarse, norm, fallback);
+  return at_candidate.shared_cost <= at_candidate.shared_reference_cost &&
+         at_candidate.terms >= 0.9 * at_fallback.terms;
+}
+
 /// Minimises the robust SDF alignment cost over the camera pose in the
 /// volume's frame with `solver` (a PoseSolver: LevenbergMarquardt,
-/// GaussNewton or the user's own), starting at `T_volume_camera`; returns the
-/// solved T_volume_camera. Use it when the volume's own pose is what is
-/// estimated (a moving object): it avoids a round trip through the volume's
-/// world pose. `cache` (optional) keeps the per-term buffers of the solve
-/// between calls, saving their allocation (LinearizationCache); `run_on`
-/// (optional) is the backend the solve's work runs on instead of the
-/// volume's, e.g. a CUDA stream of its own so that solves from several host
-/// threads overlap (ConcurrentLanes). Each solve needs its own cache.
+/// GaussNewton or the user's own), starting at `T_volume_camera`, coarse to
+/// fine when params.pyramid_levels > 1; returns the solved T_volume_camera.
+/// Use it when the volume's own pose is what is estimated (a moving object):
+/// it avoids a round trip through the volume's world pose. `cache`
+/// (optional) keeps the per-term buffers of the solve between calls, saving
+/// their allocation (LinearizationCache); `run_on` (optional) is the backend
+/// the solve's work runs on instead of the volume's, e.g. a CUDA stream of
+/// its own so that solves from several host threads overlap
+/// (ConcurrentLanes). Each solve needs its own cache.
 template <class S, Backend B, class Store, class Norm, class Solver>
   requires RobustNorm<Norm, S> && PoseSolver<Solver, S>
 SE3<S> align_in_volume(const TsdfVolume<S, B, Store>& volume, const Image<Vec3<S>, B>& points,
                        const Image<S, B>* association, const SE3<S>& T_volume_camera, const Norm& norm,
                        const SdfAlignmentParams<S>& params, const Solver& solver, SolveReport* report = nullptr,
                        LinearizationCache<S, B>* cache = nullptr, const B* run_on = nullptr) {
-  auto terms = make_sdf_alignment(volume, points, association, params);
   const B& backend = run_on ? *run_on : volume.backend();
-  // Pixels without association add nothing: skip them in every iteration.
-  if (!terms.association.empty()) {
-    terms.box = positive_box(backend, *association);
-    if (terms.box.empty()) terms.box = PixelBox{0, 0, 1, 1};  // no term at all; one pixel, q = 0
-  }
   LinearizationCache<S, B> local;
-  LinearizationCache<S, B>& values = cache ? *cache : local;
-  values.reset();
-  const auto lin = [&](const SE3<S>& T, const SE3<S>* reference) {
-    return linearize(backend, terms, norm, T, reference, values);
-  };
-  return solver.solve(lin, T_volume_camera, report);
+  return solve_coarse_to_fine(backend, sdf_alignment_in_box(volume, points, association, params, backend), norm,
+                              params, solver, T_volume_camera, report, cache ? *cache : local);
 }
 
 /// align_in_volume with Levenberg-Marquardt of parameters `lm`.

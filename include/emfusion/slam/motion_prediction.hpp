@@ -1,0 +1,44 @@
+// Where a pose is expected in the next frame: constant velocity, the motion
+// between the last two poses of a trajectory repeated over the time to the
+// new frame. Tracking starts its solve there when the frame agrees with the
+// prediction at least as well as with the last pose (slam/tracking.hpp),
+// and the E-step associates the frame at the predicted poses.
+#pragma once
+
+#include <algorithm>
+#include <cmath>
+#include <optional>
+
+#include "emfusion/core/se3.hpp"
+#include "emfusion/core/timed_pose.hpp"
+
+namespace emfusion {
+
+/// The pose at `timestamp` if the motion from `before` to `last` goes on at
+/// the same velocity (in the body frame: turns are about the body's origin).
+/// The motion is scaled by the ratio of the time steps, clamped to
+/// [0, max_ratio], so that a dropped frame doubles it and a frame with a
+/// broken timestamp cannot fling the pose away; a time step that is not
+/// positive and finite on either side repeats the motion once.
+inline SE3<double> constant_velocity(const TimedPose& before, const TimedPose& last, double timestamp,
+                                     double max_ratio = 2) {
+  const SE3<double> motion = before.pose.inverse() * last.pose;
+  const double step = last.timestamp - before.timestamp, ahead = timestamp - last.timestamp;
+  double ratio = 1;
+  if (std::isfinite(step) && std::isfinite(ahead) && step > 0 && ahead > 0) ratio = std::min(ahead / step, max_ratio);
+  if (ratio == 1) return last.pose * motion;
+  return last.pose * SE3<double>::exp(motion.log() * ratio);
+}
+
+/// The constant-velocity prediction at `timestamp` from the last two poses of
+/// `trajectory`, if it has two and they were the frames at `previous` and
+/// `last` (the two frames before this one: a pose that was not estimated in
+/// both, an object that was lost in between, predicts nothing).
+inline std::optional<SE3<double>> predict_pose(const Trajectory& trajectory, double previous, double last,
+                                               double timestamp) {
+  const std::size_t n = trajectory.size();
+  if (n < 2 || trajectory[n - 2].timestamp != previous || trajectory[n - 1].timestamp != last) return std::nullopt;
+  return constant_velocity(trajectory[n - 2], trajectory[n - 1], timestamp);
+}
+
+}  // namespace emfusion
