@@ -82,6 +82,12 @@ class ObjectModel {
     T_world_object_ = T_world_object.orthonormalized();
     sync_volume_pose();
   }
+  /// Puts back a pose the object had before, bit for bit (set_pose would
+  /// orthonormalise it once more): tracking undoes a motion prediction with it.
+  void restore_pose(const SE3<S>& earlier_pose) {
+    T_world_object_ = earlier_pose;
+    sync_volume_pose();
+  }
   const SE3<S>& T_object_volume() const { return T_object_volume_; }
 
   TsdfVolume<S, B>& volume() { return volume_; }

@@ -200,8 +200,8 @@ PoseTrack track_camera(Map<S, B>& map, const Frame<S, B>& frame, const SystemPar
 /// Tracks every live object with the camera at map.T_world_camera, object
 /// k's terms weighted by frame.associations.image(k + 1), from `starts`
 /// (predict_objects; without them, from the objects' poses); sets each
-/// object's pose to the solved one when its outcome is `tracked`, else to
-/// its previous pose. Returns one PoseTrack per object, in Map::objects
+/// object's pose to the solved one when its outcome is `tracked`, else puts
+/// back its previous pose (restore_pose). Returns one PoseTrack per object, in Map::objects
 /// order. `norm` is in voxels of each object. Each solve is independent of
 /// the others': on CUDA they run from host threads on streams of their own,
 /// so that their small kernels and the host's solver steps overlap; the
@@ -242,7 +242,7 @@ std::vector<PoseTrack> track_objects(Map<S, B>& map, const Frame<S, B>& frame, c
         track_in_volume(o.volume(), frame.points, &frame.associations.image(int(k) + 1), volume_starts,
                         scaled_norm(norm, o.volume().voxel_size()), align, solver, params.retry_tracking, judge,
                         tracks[k], ws.object_caches[k], run_on);
-    T_world_object[k] = tracks[k].outcome == TrackingOutcome::tracked ? to_world(T_volume_camera) : from.previous;
+    if (tracks[k].outcome == TrackingOutcome::tracked) T_world_object[k] = to_world(T_volume_camera);
   };
   if (ConcurrentLanes<B>::concurrent && n > 1) {
     std::vector<B> lanes;
@@ -253,7 +253,11 @@ std::vector<PoseTrack> track_objects(Map<S, B>& map, const Frame<S, B>& frame, c
   } else {
     for (std::size_t k = 0; k < n; ++k) solve(k, backend);
   }
-  for (std::size_t k = 0; k < n; ++k) map.objects[k]->set_pose(T_world_object[k]);
+  for (std::size_t k = 0; k < n; ++k) {
+    ObjectModel<S, B>& o = *map.objects[k];
+    if (tracks[k].outcome == TrackingOutcome::tracked) o.set_pose(T_world_object[k]);
+    else if (starts && (*starts)[k].predicted) o.restore_pose((*starts)[k].previous);  // undo the prediction
+  }
   return tracks;
 }
 
