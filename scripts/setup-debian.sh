@@ -3,7 +3,7 @@
 # only what is missing:
 #   bash scripts/setup-debian.sh [run|test|cuda]
 #     run   build the app and the examples on the CPU (scripts/run.sh)
-#     test  run: plus OpenEXR (optional elsewhere), Catch2, and clang with
+#     test  run: plus OpenEXR and OpenCV (optional elsewhere), Catch2, and clang with
 #           libFuzzer and LLVM's OpenMP for the fuzz build (scripts/test.sh;
 #           the default)
 #     cuda  run, built with the CUDA toolkit's nvcc and its thrust
@@ -32,7 +32,7 @@ done
 
 # A C++ header the compiler finds (with Eigen's and the CUDA toolkit's include folders).
 have_header() {
-  local flags=(-I/usr/include/eigen3 -I/usr/local/include/eigen3)
+  local flags=(-I/usr/include/eigen3 -I/usr/local/include/eigen3 -I/usr/include/opencv4 -I/usr/local/include/opencv4)
   [[ -n "$cuda_include" ]] && flags+=("-I$cuda_include/cccl" "-I$cuda_include")
   command -v g++ >/dev/null 2>&1 || return 1
   # <cstdio> first: jpeglib.h uses FILE without including it.
@@ -75,6 +75,13 @@ if [[ "$purpose" == test ]]; then
   need "OpenEXR headers" libopenexr-dev have_header OpenEXR/ImfInputFile.h
 elif ! have_header OpenEXR/ImfInputFile.h; then
   log "note: no OpenEXR headers (Debian libopenexr-dev): the build will not read .exr depth (Co-Fusion folders)"
+fi
+# OpenCV is optional too (without it, interop/opencv.hpp, its tests and the
+# opencv_sequence example are not built); the tests want it, to test them.
+if [[ "$purpose" == test ]]; then
+  need "OpenCV headers (core, imgcodecs)" libopencv-dev have_header opencv2/imgcodecs.hpp
+elif [[ "$purpose" == run ]] && ! have_header opencv2/imgcodecs.hpp; then
+  log "note: no OpenCV headers (Debian libopencv-dev): interop/opencv.hpp and the opencv_sequence example are left out"
 fi
 if [[ "$purpose" == cuda ]]; then
   # thrust comes with the toolkit; nvcc itself is not a Debian package here.

@@ -3,7 +3,11 @@
 // emfusion::io (whose OpenEXR, when the library was built with it, the
 // package config must find again; without it, the error that says so), and
 // a few frames of the full system with a likelihood and a robust norm
-// defined here, as a user's own. Exits non-zero on a wrong result.
+// defined here, as a user's own. Where the package has emfusion::opencv and
+// OpenCV is here (CONSUMER_WITH_OPENCV), the system's frames go through
+// cv::Mat as a camera driver's would (16-bit depth, a label Mat) and a Mat
+// header over an image is checked to share its pixels. Exits non-zero on a
+// wrong result.
 #include <algorithm>
 #include <cstdint>
 #include <cmath>
@@ -21,6 +25,13 @@
 #include <emfusion/sim/primitives.hpp>
 #include <emfusion/sim/render.hpp>
 #include <emfusion/slam/system.hpp>
+
+#ifndef CONSUMER_WITH_OPENCV
+#define CONSUMER_WITH_OPENCV 0
+#endif
+#if CONSUMER_WITH_OPENCV
+#include <emfusion/interop/opencv.hpp>
+#endif
 
 namespace {
 
@@ -70,6 +81,13 @@ int run_system() {
     for (int l : labels.to_host()) ball.push_back(std::uint16_t(l == 2 ? 1 : 0));
     det.labels = Image<std::uint16_t, Host>::from_host(camera.width, camera.height, ball);
     det.instances.push_back({1, "sports_ball", 0.9});
+#if CONSUMER_WITH_OPENCV
+    // The frame as a driver would give it: 16-bit depth (5000 per metre) and
+    // the detector's label image as Mats, turned back by the interop.
+    const cv::Mat raw = opencv::depth_to_mat(depth, 5000);
+    depth = opencv::depth_from_mat(raw, 5000);
+    det = opencv::detections_from_labels(opencv::to_mat(det.labels), det.instances, k / 30.0);
+#endif
     const FrameResult r = system.process(depth, k / 30.0, k == 0 ? &det : nullptr);
     const double error = double(norm(system.camera_pose().translation() - pose.translation()));
     if (k > 0 && (r.camera_tracking != TrackingOutcome::tracked || !(error < 0.01))) {
@@ -138,10 +156,20 @@ int main() {
     }
   }
 
+#if CONSUMER_WITH_OPENCV
+  // A Mat header over the image shares its pixels, and views back to them.
+  auto shared = emfusion::Image<float, emfusion::Host>::from_host(width, height, pixels);
+  const cv::Mat header = emfusion::opencv::mat_view(shared);
+  if (emfusion::opencv::view<const float>(header).data != shared.view().data || header.at<float>(1, 2) != pixels[66]) {
+    std::fprintf(stderr, "consumer: opencv::mat_view does not share the image's pixels\n");
+    ++failures;
+  }
+#endif
+
   failures += run_system();
 
   if (failures == 0)
-    std::printf("consumer: ok (SE3 round trip error %g, image sum %g, EXR, 5 system frames with a user's likelihood and norm)\n",
-                max_err, sum);
+    std::printf("consumer: ok (SE3 round trip error %g, image sum %g, EXR, 5 system frames with a user's likelihood and norm%s)\n",
+                max_err, sum, CONSUMER_WITH_OPENCV ? ", frames through cv::Mat" : "");
   return failures == 0 ? 0 : 1;
 }
