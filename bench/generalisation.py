@@ -302,7 +302,7 @@ def run_dir(work, s, backend):
 
 def run_one(args, s):
     seq = seq_dir(args.work, s)
-    out = run_dir(args.work, s, args.backend)
+    out = run_dir(args.work, s, args.backend + args.tag)
     if not os.path.isfile(os.path.join(seq, 'bench_params.json')):
         return s['name'], 'not generated (run the generate step)', 0.0
     if os.path.isdir(out):
@@ -627,7 +627,7 @@ def fmt(v, spec, none='-'):
 def report(args, seqs):
     rows, results, unscored = [], {}, []
     for s in seqs:
-        seq, out = seq_dir(args.work, s), run_dir(args.work, s, args.backend)
+        seq, out = seq_dir(args.work, s), run_dir(args.work, s, args.backend + args.tag)
         rj = os.path.join(out, 'bench_run.json')
         if not os.path.isfile(os.path.join(seq, 'bench_labels.json')):
             log('[report] %s: not generated' % s['name'])
@@ -855,6 +855,8 @@ def main():
     ap.add_argument('--to', default=None, help='export: the folder to copy the sequences to')
     ap.add_argument('--markdown', action='store_true', help='print the table as markdown')
     ap.add_argument('--json', default=None, help='also write the scored results to this file')
+    ap.add_argument('--tag', default='', help='run and report: a name for this set of runs (runs/<backend><tag>/), '
+                    'so that runs with other --app-arg settings sit side by side, e.g. --tag=-predict')
     ap.add_argument('--app-arg', dest='app_args', action='append', default=[],
                     help='extra argument for `emfusion run` (repeatable, e.g. --app-arg=--set --app-arg=key=value)')
     args = ap.parse_args()

@@ -68,6 +68,7 @@
 #include "emfusion/io/tum.hpp"
 #include "emfusion/sim/detector.hpp"
 #include "emfusion/sim/dynamic_scene.hpp"
+#include "emfusion/slam/object_history.hpp"
 #include "emfusion/slam/system.hpp"
 #include "emfusion/volume/marching_cubes.hpp"
 #include "support/backend.hpp"
@@ -311,6 +312,35 @@ std::pair<double, double> median_p90(std::vector<double> v) {
   return {at(0.5), at(0.9)};
 }
 
+/// run.json's "objects": per object its class, tracking counts and events
+/// (docs/io.md, "run.json"); and one line per object on stdout, e.g.
+/// "object 3 (cup): created 12, lost 150, found_again 171; tracked 270, refused 2, retried 1".
+void write_object_histories(JsonWriter& json, const ObjectHistories& histories,
+                            const std::vector<ObjectRecord>& records) {
+  json.begin_array("objects");
+  for (const auto& [id, h] : histories.objects()) {
+    std::string class_name = "?";
+    for (const ObjectRecord& r : records)
+      if (r.id == id) class_name = r.class_name;
+    json.begin().integer("id", id).string("class", class_name);
+    json.integer("tracked_frames", h.tracked).integer("refused_frames", h.refused);
+    json.integer("retried_frames", h.retried).integer("from_prediction_frames", h.from_prediction);
+    json.begin_array("events");
+    std::string line;
+    for (const ObjectEvent& e : h.events) {
+      json.begin().string("event", to_string(e.kind)).integer("frame", e.frame).number("timestamp", e.timestamp);
+      if (e.kind == ObjectEventKind::deleted || e.kind == ObjectEventKind::lost) json.string("rule", to_string(e.reason));
+      json.end();
+      line += (line.empty() ? "" : ", ") + std::string(to_string(e.kind)) + " " + std::to_string(e.frame);
+      if (e.kind == ObjectEventKind::deleted) line += std::string(" (") + to_string(e.reason) + ")";
+    }
+    json.end_array().end();
+    std::printf("object %d (%s): %s; tracked %d, refused %d, retried %d\n", id, class_name.c_str(),
+                line.empty() ? "no events" : line.c_str(), h.tracked, h.refused, h.retried);
+  }
+  json.end_array();
+}
+
 void print_evaluation(const Trajectory& est_cam, const std::map<int, Trajectory>& est_objects, const GroundTruth& gt,
                       JsonWriter* json) {
   if (est_cam.size() < 3) {
@@ -533,6 +563,7 @@ void run(const RunOptions& o) {
   if (first > 0) streams.update(system.camera_trajectory(), system.object_records());
 
   std::vector<StageTimes> times;
+  ObjectHistories histories;  // of the frames this process ran (a resumed run: since the checkpoint)
   // One updating progress line on a terminal; plain lines on a pipe and in
   // CI (which may run the app on a pseudo-terminal).
   const bool tty = isatty(fileno(stderr)) && std::getenv("CI") == nullptr;
@@ -545,6 +576,7 @@ void run(const RunOptions& o) {
     const Image<S, B> depth = in.depth(i).template to<B>(backend);
     const std::optional<Detections> det = in.detect(int(i), t);
     const FrameResult r = system.process(depth, t, det ? &*det : nullptr);
+    histories.add(r, system.map());
     processed = i + 1;
     streams.update(system.camera_trajectory(), system.object_records());
     if (o.checkpoint_every > 0 && processed % std::size_t(o.checkpoint_every) == 0 && processed < frames)
@@ -627,6 +659,7 @@ void run(const RunOptions& o) {
   stage("foreground", &StageTimes::foreground);
   stage("total", &StageTimes::total);
   json.end();
+  write_object_histories(json, histories, system.object_records());
   std::vector<double> totals;
   for (const auto& t : times) totals.push_back(t.total);
   const auto [med, p90] = median_p90(totals);

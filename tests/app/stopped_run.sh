@@ -112,6 +112,18 @@ case $case in
       check_tum "$work/out/objects/$id.txt"
       [ "$(poses "$work/out/objects/$id.txt")" -le "$n" ] || fail "objects/$id.txt has more than $n poses"
     done
+    # run.json's objects (their events and tracking counts): one entry per
+    # object of objects.txt, each created once and tracked at most n frames.
+    python3 - "$work/out/run.json" "$n" $ids <<'PY' || fail "run.json's objects do not match objects.txt"
+import json, sys
+run = json.load(open(sys.argv[1]))
+frames, ids = int(sys.argv[2]), sorted(int(i) for i in sys.argv[3:])
+objects = {o['id']: o for o in run['objects']}
+assert sorted(objects) == ids, (sorted(objects), ids)
+for o in objects.values():
+    assert [e['event'] for e in o['events']].count('created') == 1, o
+    assert 0 <= o['tracked_frames'] + o['refused_frames'] <= frames, o
+PY
     [ -s "$work/out/meshes/background.ply" ] || fail "meshes/background.ply is missing"
     ls "$work/out/meshes/"object_*.ply >/dev/null 2>&1 || fail "no object mesh"
     ls "$work/out" "$work/out/objects" "$work/out/meshes" | grep -q '\.tmp$' && fail "a .tmp file was left"

@@ -88,8 +88,8 @@ inline std::vector<ObjectListEntry> read_object_list(const std::string& path) {
   return out;
 }
 
-/// A flat JSON object writer for run.json and eval results: enough for
-/// numbers, strings, booleans and nested objects, escaping strings.
+/// A small JSON writer for run.json and eval results: enough for numbers,
+/// strings, booleans, nested objects and arrays, escaping strings.
 class JsonWriter {
  public:
   JsonWriter& begin(const std::string& key = "") {
@@ -106,6 +106,21 @@ class JsonWriter {
     first_ = false;
     return *this;
   }
+  /// An array: its elements are begin() objects or keyless values
+  /// (number, integer, string with an empty key).
+  JsonWriter& begin_array(const std::string& key) {
+    separator();
+    text_ += quote(key) + ": [";
+    first_ = true;
+    ++depth_;
+    return *this;
+  }
+  JsonWriter& end_array() {
+    --depth_;
+    text_ += "\n" + std::string(std::size_t(2 * depth_), ' ') + "]";
+    first_ = false;
+    return *this;
+  }
   JsonWriter& number(const std::string& key, double value) {
     return raw(key, std::isfinite(value) ? detail::tum::format(value) : "null");
   }
@@ -117,7 +132,7 @@ class JsonWriter {
  private:
   JsonWriter& raw(const std::string& key, const std::string& value) {
     separator();
-    text_ += quote(key) + ": " + value;
+    text_ += (key.empty() ? std::string() : quote(key) + ": ") + value;
     return *this;
   }
   void separator() {

@@ -90,6 +90,8 @@ struct ObjectStatus {
   int id = 0;
   TrackingOutcome tracking = TrackingOutcome::not_tracked;
   PoseStep step;                  ///< the motion its solve proposed (world frame, object origin)
+  bool from_prediction = false;   ///< the solve taken started at the motion prediction (PoseTrack)
+  int attempts = 0;               ///< solves run (2: retried from the other start)
   int rendered_pixels = 0;        ///< rendered pixels inside the visibility border
   int associated_pixels = 0;      ///< pixels inside the border whose association to it exceeds 0.5
   int visible_pixels = 0;         ///< the larger of the two: what the visibility rule compares

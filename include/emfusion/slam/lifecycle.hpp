@@ -95,8 +95,11 @@ ObjectStatus object_status(const Map<S, B>& map, const Frame<S, B>& frame, int k
   ObjectStatus status;
   status.id = o.id();
   if (std::size_t(k) < frame.object_tracks.size()) {
-    status.tracking = frame.object_tracks[std::size_t(k)].outcome;
-    status.step = frame.object_tracks[std::size_t(k)].step;
+    const PoseTrack& t = frame.object_tracks[std::size_t(k)];
+    status.tracking = t.outcome;
+    status.step = t.step;
+    status.from_prediction = t.from_prediction;
+    status.attempts = t.attempts;
   }
   status.rendered_pixels = px.rendered_inner;
   status.associated_pixels = px.associated_inner;

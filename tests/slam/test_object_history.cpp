@@ -1,0 +1,85 @@
+// ObjectHistories (slam/object_history.hpp): the events and tracking counts
+// of each object, gathered from hand-made FrameResults and a map's lost
+// list and records.
+#include <memory>
+
+#include "emfusion/slam/object_history.hpp"
+#include "support/catch.hpp"
+
+using namespace emfusion;
+
+namespace {
+using S = float;
+std::unique_ptr<ObjectModel<S, Host>> object(int id) {
+  return std::make_unique<ObjectModel<S, Host>>(id, "cup", SE3<S>::identity(), 8, S(0.01), S(10));
+}
+FrameResult frame(int f) {
+  FrameResult r;
+  r.frame = f;
+  r.timestamp = f / 30.0;
+  return r;
+}
+ObjectStatus status(int id, TrackingOutcome outcome, int attempts, bool from_prediction) {
+  ObjectStatus s;
+  s.id = id;
+  s.tracking = outcome;
+  s.attempts = attempts;
+  s.from_prediction = from_prediction;
+  return s;
+}
+}  // namespace
+
+TEST_CASE("Object histories: created, tracked, retried, lost, found again, given up, deleted", "[slam]") {
+  SystemParams<S> params;
+  params.background_voxels = 8;
+  Map<S, Host> map(params);
+  map.records = {ObjectRecord{}, ObjectRecord{}};
+  map.records[0].id = 1, map.records[1].id = 2;
+  ObjectHistories h;
+
+  FrameResult r = frame(0);
+  r.created = {1, 2};
+  h.add(r, map);
+  r = frame(1);
+  r.object_status = {status(1, TrackingOutcome::tracked, 2, true), status(2, TrackingOutcome::jump_rejected, 2, false)};
+  h.add(r, map);
+  // Object 1 is deleted as not visible and kept as lost; 2 by the existence rule.
+  r = frame(2);
+  r.deleted = {1, 2};
+  map.records[0].reason = DeletionReason::not_visible, map.records[1].reason = DeletionReason::existence;
+  map.lost.push_back(LostObject<S, Host>{object(1), 2});
+  h.add(r, map);
+  r = frame(3);
+  r.reidentified = {1};
+  map.lost.clear();
+  h.add(r, map);
+  r = frame(4);
+  r.deleted = {1};
+  map.lost.push_back(LostObject<S, Host>{object(1), 4});
+  h.add(r, map);
+  r = frame(5);  // kept longer than lost_object_frames: gone without a report of its own
+  map.lost.clear();
+  h.add(r, map);
+
+  REQUIRE(h.objects().size() == 2);
+  const ObjectHistory& a = h.objects().at(1);
+  const ObjectHistory& b = h.objects().at(2);
+  CHECK(a.tracked == 1);
+  CHECK(a.retried == 1);
+  CHECK(a.from_prediction == 1);
+  CHECK(b.refused == 1);
+  CHECK(b.retried == 1);
+  REQUIRE(a.events.size() == 5);
+  CHECK(a.events[0].kind == ObjectEventKind::created);
+  CHECK(a.events[1].kind == ObjectEventKind::lost);
+  CHECK(a.events[1].reason == DeletionReason::not_visible);
+  CHECK(a.events[2].kind == ObjectEventKind::found_again);
+  CHECK(a.events[2].frame == 3);
+  CHECK(a.events[3].kind == ObjectEventKind::lost);
+  CHECK(a.events[4].kind == ObjectEventKind::given_up);
+  CHECK(a.events[4].frame == 5);
+  REQUIRE(b.events.size() == 2);
+  CHECK(b.events[1].kind == ObjectEventKind::deleted);
+  CHECK(b.events[1].reason == DeletionReason::existence);
+  CHECK(std::string(to_string(ObjectEventKind::found_again)) == "found_again");
+}
