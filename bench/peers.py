@@ -372,7 +372,9 @@ def run_open3d(seq, traj_out, max_frames, trunc_multiplier, reject, log):
                     res = od.compute_odometry_result_point_to_plane(
                         src_v[level].as_tensor(), tgt_v[level].as_tensor(), tgt_n[level].as_tensor(), ks[level],
                         delta, depth_diff, huber)
-                    delta = res.transformation
+                    # The result is the increment on top of the pose it started from, as
+                    # RGBDOdometryMultiScale composes it: trans = delta * trans.
+                    delta = res.transformation @ delta
                     if prev is not None and abs(res.fitness - prev[0]) <= 1e-6 * max(prev[0], 1e-12) and \
                             abs(res.inlier_rmse - prev[1]) <= 1e-6 * max(prev[1], 1e-12):
                         break
@@ -495,6 +497,13 @@ def run(args):
     method_names = [c[0] for c in configs] + (['open3d'] if 'open3d' in methods else [])
     results = {'command': ' '.join(shlex.quote(a) for a in sys.argv), 'started': time.strftime('%Y-%m-%d %H:%M:%S'),
                'cpu_count': os.cpu_count(), 'configs': {n: a for n, a in configs}, 'sequences': {}}
+    previous, reuse = {}, [m for m in (args.reuse or '').split(',') if m]
+    for m in reuse:
+        if m not in method_names:
+            raise UsageError('--reuse %s: not a method of this run (%s)' % (m, ', '.join(method_names)))
+    if reuse and os.path.isfile(os.path.join(args.out, 'results.json')):
+        with open(os.path.join(args.out, 'results.json')) as f:
+            previous = json.load(f)
     env = dict(os.environ)
     env.setdefault('OMP_WAIT_POLICY', 'passive')
     if not args.no_prefix:   # a longer run first, so that its prefixes can be read from it
@@ -530,14 +539,27 @@ def run(args):
                     log('  failed: %s' % e)
                 entry['methods'][method] = rec
                 continue
+            if method == 'open3d':
+                cmd = ['/usr/bin/python3', os.path.abspath(__file__), 'open3d', seq, traj, '--max-frames', str(n),
+                       '--o3d-trunc', str(args.o3d_trunc), '--o3d-reject', str(args.o3d_reject)]
+            else:
+                cmd = [args.track_camera, seq, traj, '--max-frames', str(n)] + dict(configs)[method]
+            old = previous.get('sequences', {}).get(name, {}).get('methods', {}).get(method, {})
+            if method in reuse and 'ms_per_frame' in old and old.get('command') == ' '.join(shlex.quote(c) for c in cmd) \
+                    and os.path.isfile(traj):
+                log('%s: %s: reusing the run in %s (--reuse)' % (name, method, traj))
+                rec = {k: old[k] for k in ('command', 'wall_s', 'returncode', 'ms_per_frame', 'cpu_ms_per_frame')}
+                rec['reused'] = True
+                try:
+                    score(rec, args.evaluate, gt, traj, log)
+                except (OSError, RuntimeError, ValueError) as e:
+                    rec = {'error': str(e)}
+                    log('  failed: %s' % e)
+                entry['methods'][method] = rec
+                continue
             log('%s: %s (%d frames) ...' % (name, method, n))
             t0, r0 = time.time(), resource.getrusage(resource.RUSAGE_CHILDREN)
             try:
-                if method == 'open3d':
-                    cmd = ['/usr/bin/python3', os.path.abspath(__file__), 'open3d', seq, traj, '--max-frames', str(n),
-                           '--o3d-trunc', str(args.o3d_trunc), '--o3d-reject', str(args.o3d_reject)]
-                else:
-                    cmd = [args.track_camera, seq, traj, '--max-frames', str(n)] + dict(configs)[method]
                 with open(logfile, 'w') as lf:
                     p = subprocess.run(cmd, stdout=lf, stderr=subprocess.STDOUT, env=env)
                 wall = time.time() - t0
@@ -703,6 +725,9 @@ def main():
     r.add_argument('--quick', action='store_true', help='first %d frames of %s' % (QUICK_FRAMES, ' and '.join(QUICK)))
     r.add_argument('--max-frames', type=int, help='at most N frames of each sequence')
     r.add_argument('--out', help='output folder (default bench/out/peers, or bench/out/peers-quick)')
+    r.add_argument('--reuse', metavar='METHODS',
+                   help='comma-separated methods whose earlier runs in --out (same command, trajectory present) '
+                        'are scored again instead of re-run, e.g. after a change to the other methods only')
     r.add_argument('--no-prefix', action='store_true',
                    help='run redkitchen_300 and tab600 themselves, not as the first frames of the tab900 run')
     r.add_argument('--o3d-trunc', type=float, default=8.0, help="Open3D's truncation in voxels (default 8)")
