@@ -11,6 +11,17 @@ in a git-ignored folder. It is a base for shared/tools/dyngen.py composite, e.g.
   /usr/bin/python3 bench/there_and_back.py --base ../shared/data/redkitchen_300 --frames 600 --out bench/out/base/tab600
   /usr/bin/python3 ../shared/tools/dyngen.py composite --base bench/out/base/tab600 --frames 0:600 --out DIR
 
+--step K keeps every K-th frame of the played order (played frames 0, K, 2K, ... of the --frames
+played): ceil(frames / K) frames, still re-stamped at the base's frame period, so the camera moves
+K times as fast between frames (a frame-dropped recording). With the base's own length it is the
+base with frames dropped:
+
+  /usr/bin/python3 bench/there_and_back.py --base ../shared/data/redkitchen_300 --frames 300 --step 2 --out bench/out/seq/drop2
+  /usr/bin/python3 bench/there_and_back.py --base ../shared/data/redkitchen_300 --frames 900 --step 2 --out bench/out/seq/tab900s2
+
+K = 1 (the default) keeps every frame, the output as before the option existed. --frames and
+--step must be positive integers, and must leave at least 2 frames.
+
 Python 3 only (no numpy).
 """
 
@@ -42,15 +53,58 @@ def frame_order(n_base, n):
     return out
 
 
+def positive_int(name):
+    """argparse type: an integer >= 1, else an error naming the option and the value."""
+    def parse(text):
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError('%s expects a positive integer, got %r' % (name, text))
+        if value < 1:
+            raise argparse.ArgumentTypeError('%s expects a positive integer, got %r' % (name, text))
+        return value
+    return parse
+
+
+def stepped(order, step):
+    """Every step-th entry of the played order, from the first: a frame-dropped playback."""
+    return order[::step]
+
+
+def read_base_list(base, name, fields):
+    """read_list of a file of the base with `fields` or more fields per row; SystemExit naming the file otherwise."""
+    path = os.path.join(base, name)
+    try:
+        rows = read_list(path)
+    except OSError as e:
+        raise SystemExit('there_and_back: cannot read %s: %s (--base must be a TUM-layout sequence with '
+                         'associations.txt and groundtruth.txt)' % (path, e.strerror or e))
+    for i, r in enumerate(rows):
+        if len(r) < fields:
+            raise SystemExit('there_and_back: %s: data row %d has %d fields, expected %d' % (path, i + 1, len(r), fields))
+    if not rows:
+        raise SystemExit('there_and_back: %s has no data rows' % path)
+    return rows
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument('--base', required=True, help='static TUM-layout sequence with associations.txt and groundtruth.txt')
-    ap.add_argument('--frames', type=int, required=True)
+    ap.add_argument('--frames', type=positive_int('--frames'), required=True,
+                    help='frames played (forward, back, forward, ...) before --step')
+    ap.add_argument('--step', type=positive_int('--step'), default=1,
+                    help='keep every K-th played frame (default 1: all); the output has ceil(frames / K) frames')
     ap.add_argument('--out', required=True)
     args = ap.parse_args()
+    kept = (args.frames + args.step - 1) // args.step
+    if kept < 2:
+        ap.error('--frames %d with --step %d keeps %d frame; a sequence needs at least 2 (use a smaller --step)'
+                 % (args.frames, args.step, kept))
     base = os.path.abspath(args.base)
-    assoc = read_list(os.path.join(base, 'associations.txt'))
-    gt = {r[0]: r[1:8] for r in read_list(os.path.join(base, 'groundtruth.txt'))}
+    if not os.path.isdir(base):
+        raise SystemExit('there_and_back: --base %s is not a directory' % base)
+    assoc = read_base_list(base, 'associations.txt', 4)
+    gt = {r[0]: r[1:8] for r in read_base_list(base, 'groundtruth.txt', 8)}
     gt_t = sorted(gt, key=float)
 
     def pose_of(t):   # the reference pose at (or nearest, within 1 ms) the depth timestamp
@@ -61,7 +115,7 @@ def main():
 
     ts = [float(r[0]) for r in assoc]
     dt = (ts[-1] - ts[0]) / (len(ts) - 1) if len(ts) > 1 else 1 / 30.0   # mean period (stamps are rounded)
-    order = frame_order(len(assoc), args.frames)
+    order = stepped(frame_order(len(assoc), args.frames), args.step)
     os.makedirs(args.out, exist_ok=True)
     for d in ('rgb', 'depth'):
         link = os.path.join(args.out, d)
@@ -87,10 +141,13 @@ def main():
         shutil.copyfile(os.path.join(base, 'calibration.txt'), os.path.join(args.out, 'calibration.txt'))
     with open(os.path.join(args.out, 'README.txt'), 'w') as f:
         f.write('There-and-back sequence made by bench/there_and_back.py: %s played forward, backward, forward, ...\n'
-                'for %d frames (base frames in order: %s), timestamps re-stamped every %.6f s,\n'
+                'for %d frames%s (base frames in order: %s), timestamps re-stamped every %.6f s,\n'
                 'reference poses kept. Images are links into the base: its licence applies; do not commit.\n'
-                % (base, args.frames, ' '.join(str(k) for _, _, _, _, k in rows), dt))
-    print('there_and_back: %d frames of %s -> %s' % (args.frames, base, args.out))
+                % (base, args.frames, ', one in %d kept: %d frames' % (args.step, len(rows)) if args.step > 1 else '',
+                   ' '.join(str(k) for _, _, _, _, k in rows), dt))
+    print('there_and_back: %d frames of %s%s -> %s' % (args.frames, base,
+                                                     ' (one in %d: %d frames)' % (args.step, len(rows))
+                                                     if args.step > 1 else '', args.out))
     return 0
 
 

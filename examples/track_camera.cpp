@@ -1,10 +1,13 @@
 // track_camera: a dense camera tracker composed from emfusion's public parts
 // (the background half of EM-Fusion without objects): filter the depth,
 // align it to the background TSDF (SDF alignment, Huber, Levenberg-
-// Marquardt), integrate it at the new pose. Reads a TUM-layout sequence and
-// writes the camera trajectory in TUM format.
+// Marquardt), integrate it at the new pose. Reads a TUM-layout sequence or a
+// built-in scene (synthetic:long, synthetic:long-slow, synthetic:long-small,
+// rendered on the fly; examples/support/camera_input.hpp) and writes the
+// camera trajectory in TUM format; --ground-truth FILE also writes the
+// input's reference trajectory (the scene's exact poses, or groundtruth.txt).
 //
-//   track_camera <sequence-dir> <trajectory.txt> [--backend cpu|cuda]
+//   track_camera <sequence-dir|synthetic:scene> <trajectory.txt> [--ground-truth FILE] [--backend cpu|cuda]
 //                [--max-frames N] [--voxels N] [--voxel-size M] [--stride N] [--tau T]
 //                [--integration paper|refined] [--behind-band F] [--silhouette-guard VOXELS]
 //                [--bilateral-radius R] [--central-gradient] [--depth-weight Z] [--store float|half]
@@ -35,6 +38,7 @@
 #include "emfusion/solve/sdf_alignment.hpp"
 #include "emfusion/volume/integrate.hpp"
 #include "support/args.hpp"
+#include "support/camera_input.hpp"
 
 using namespace emfusion;
 using S = float;
@@ -43,6 +47,7 @@ namespace {
 
 struct Options {
   std::string sequence, output, backend = "cpu";
+  std::string ground_truth;  // --ground-truth: where to write the input's reference trajectory
   int max_frames = 0, voxels = 512, stride = 1;
   bool verbose = false, central_gradient = false, predict = false, retry = false;
   int pyramid = 1;
@@ -61,7 +66,8 @@ struct Options {
 template <class B, class Store>
 void track(const Options& o) {
   const B backend{};
-  const TumSequence seq = TumSequence::open(o.sequence);
+  const examples::CameraInput seq(o.sequence);
+  if (!o.ground_truth.empty()) write_tum_trajectory(o.ground_truth, seq.ground_truth());
   const PinholeCamera<S> camera = seq.camera().cast<S>();
   const int frames = o.max_frames > 0 && o.max_frames < int(seq.size()) ? o.max_frames : int(seq.size());
 
@@ -149,6 +155,7 @@ Options parse(int argc, char** argv) {
     else if (a == "--predict") o.predict = true;
     else if (a == "--retry") o.retry = true;
     else if (a == "--pyramid") o.pyramid = examples::parse_int(a, v, 1, 6);
+    else if (a == "--ground-truth") o.ground_truth = v;
     else if (a == "--backend") o.backend = v;
     else if (a == "--max-frames") o.max_frames = examples::parse_positive_int(a, v);
     else if (a == "--voxels") o.voxels = examples::parse_positive_int(a, v, 2048);
@@ -172,7 +179,8 @@ Options parse(int argc, char** argv) {
     else throw std::invalid_argument("unknown option '" + a + "'");
   });
   if (positional.size() != 2)
-    throw std::invalid_argument("usage: track_camera <sequence-dir> <trajectory.txt> [--backend cpu|cuda] "
+    throw std::invalid_argument("usage: track_camera <sequence-dir|synthetic:scene> <trajectory.txt> "
+                                "[--ground-truth FILE] [--backend cpu|cuda] "
                                 "[--max-frames N] [--voxels N] [--voxel-size M] [--stride N] [--tau T] "
                                 "[--integration paper|refined] [--behind-band F] [--silhouette-guard G] "
                                 "[--bilateral-radius R] [--depth-weight Z] [--central-gradient] [--store float|half] "

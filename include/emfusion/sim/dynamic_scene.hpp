@@ -332,13 +332,28 @@ class DynamicScene {
   std::vector<int> shape_object_;
 };
 
+/// The camera's path through the room (make_dynamic_room).
+enum class CameraPath {
+  /// A slow hand-held sweep in front of the table (peak about 0.23 m/s and
+  /// 4 deg/s).
+  hand_held,
+  /// The same sweep with fast segments: every few seconds (placement from the
+  /// seed) a stretch of 1.6-2.4 s in which the sweep is played up to twice as
+  /// fast while the camera swings sideways and turns away and back, eased in
+  /// and out (sin^2 profiles, zero acceleration jump at the ends), peaking at
+  /// 0.70-0.85 m/s and 35-42 deg/s: the fastest parts of a real hand-held
+  /// recording. Between the segments it is the hand_held path, time-shifted.
+  hand_held_fast,
+};
+
 /// What make_dynamic_room builds.
 struct DynamicSceneParams {
   int frames = 300;
   int width = 640, height = 480;  ///< intrinsics scale with width: f = 525 * width / 640
-  int moving_objects = 3;         ///< 1..8
-  std::uint64_t seed = 1;         ///< object placement, motions and depth noise
+  int moving_objects = 3;         ///< 0..8 (0: a static room)
+  std::uint64_t seed = 1;         ///< object placement, motions, fast segments and depth noise
   bool moving_camera = true;      ///< false: the camera stays at its first pose
+  CameraPath camera_path = CameraPath::hand_held;
   DepthNoise noise{};
 };
 
@@ -427,12 +442,139 @@ std::vector<Shape<S>> static_shapes() {
 /// Hand-held camera: a slow sideways sweep in front of the table (peak speed
 /// about 0.22 m/s), looking at a point that drifts less than the eye, so the
 /// view both translates and turns.
-inline SE3<double> camera_pose_at(double t) {
+inline Vec3<double> camera_eye_at(double t) {
   const double w = 2 * pi;
-  const Vec3<double> eye =
-      vec3(0.45 * std::sin(w * t / 14), -1.35 + 0.15 * std::sin(w * t / 9), 1.75 + 0.08 * std::sin(w * t / 11 + 1));
-  const Vec3<double> target = vec3(0.2 * std::sin(w * t / 14 + 0.5), 0.5 + 0.1 * std::sin(w * t / 10), 0.3);
-  return look_at(eye, target, vec3(0.0, 0.0, 1.0));
+  return vec3(0.45 * std::sin(w * t / 14), -1.35 + 0.15 * std::sin(w * t / 9), 1.75 + 0.08 * std::sin(w * t / 11 + 1));
+}
+inline Vec3<double> camera_target_at(double t) {
+  const double w = 2 * pi;
+  return vec3(0.2 * std::sin(w * t / 14 + 0.5), 0.5 + 0.1 * std::sin(w * t / 10), 0.3);
+}
+inline SE3<double> camera_pose_at(double t) {
+  return look_at(camera_eye_at(t), camera_target_at(t), vec3(0.0, 0.0, 1.0));
+}
+
+/// One fast segment of CameraPath::hand_held_fast: during [t0, t0 + duration]
+/// the sweep's clock runs at 1 + (warp - 1) b(tau), the eye is shifted by
+/// shift b(tau) along x and the view turned by turn b(tau) about `axis`
+/// (through the eye), with b = sin^2(pi tau), tau in [0, 1]: every offset
+/// starts and ends at rest, and the path is back on the sweep after it.
+struct FastSegment {
+  double t0 = 0, duration = 0;
+  double warp = 1;   // clock rate at the peak
+  double shift = 0;  // m along world x, signed
+  double turn = 0;   // rad
+  Vec3<double> axis = vec3(0.0, 0.0, 1.0);
+};
+
+/// The fast hand-held path: the sweep plus its fast segments.
+struct FastPath {
+  std::vector<FastSegment> segments;  // in time order, disjoint
+
+  /// The sweep's clock at time t: t plus what the segments before t (and
+  /// the one t is in) ran ahead.
+  double clock(double t) const {
+    double s = t;
+    for (const FastSegment& g : segments) {
+      if (t <= g.t0) break;
+      const double tau = std::fmin(1.0, (t - g.t0) / g.duration);
+      // Integral of sin^2(pi tau) over [0, tau], times the duration.
+      s += (g.warp - 1) * g.duration * (tau / 2 - std::sin(2 * pi * tau) / (4 * pi));
+    }
+    return s;
+  }
+  SE3<double> pose(double t) const {
+    const double s = clock(t);
+    Vec3<double> eye = camera_eye_at(s);
+    Mat3<double> turn = Mat3<double>::identity();
+    for (const FastSegment& g : segments)
+      if (t > g.t0 && t < g.t0 + g.duration) {
+        const double b = std::sin(pi * (t - g.t0) / g.duration);
+        eye = eye + vec3(g.shift * b * b, 0.0, 0.0);
+        turn = so3_exp(g.turn * b * b * g.axis);
+      }
+    const SE3<double> base = look_at(eye, camera_target_at(s), vec3(0.0, 0.0, 1.0));
+    return SE3<double>(turn * base.rotation(), eye);
+  }
+};
+
+/// Peak linear (m/s) and angular (rad/s) speed of `path` over [t0, t1],
+/// from differences at 240 Hz.
+inline std::pair<double, double> peak_speeds(const FastPath& path, double t0, double t1) {
+  const double dt = 1.0 / 240;
+  double v = 0, w = 0;
+  SE3<double> previous = path.pose(t0);
+  for (double t = t0 + dt; t <= t1 + 1e-9; t += dt) {
+    const SE3<double> next = path.pose(t);
+    v = std::fmax(v, norm(next.translation() - previous.translation()) / dt);
+    w = std::fmax(w, norm(so3_log((previous.rotation().transpose() * next.rotation()))) / dt);
+    previous = next;
+  }
+  return {v, w};
+}
+
+/// The fast segments of a sequence of `duration` seconds, from the seed:
+/// starts 2.5-5 s after the previous segment's end (the first 1.5-3 s in),
+/// lengths 1.6-2.4 s, the clock up to twice as fast, and the sideways swing
+/// and the turn sized (bisection on the measured peaks) so that the peaks
+/// reach targets drawn from 0.70-0.85 m/s and 35-42 deg/s. The swing goes the
+/// way the sweep moves at the segment's middle, the turn about an axis
+/// between the world's vertical and the camera's x axis (a pan with some
+/// tilt), either way.
+inline FastPath plan_fast_path(std::uint64_t seed, double duration) {
+  FastPath path;
+  HashRng rng(seed, 3000);
+  double t0 = rng.uniform(1.5, 3.0);
+  for (;;) {
+    FastSegment g;
+    g.t0 = t0;
+    g.duration = rng.uniform(1.6, 2.4);
+    g.warp = 2;
+    const double v_target = rng.uniform(0.70, 0.85), w_target = rng.uniform(35, 42) * pi / 180;
+    const double tilt = rng.uniform(-0.5, 0.5);
+    const bool turn_left = rng.bernoulli(0.5);
+    if (g.t0 + g.duration > duration) break;
+    t0 = g.t0 + g.duration + rng.uniform(2.5, 5.0);
+    FastPath trial = path;
+    trial.segments.push_back(g);
+    const double mid = g.t0 + g.duration / 2;
+    const double s_mid = trial.clock(mid);
+    const double sign = camera_eye_at(s_mid + 1e-3).x() >= camera_eye_at(s_mid - 1e-3).x() ? 1 : -1;
+    const Vec3<double> right = camera_pose_at(s_mid).rotation() * vec3(1.0, 0.0, 0.0);
+    g.axis = normalized(std::cos(tilt) * vec3(0.0, 0.0, 1.0) + std::sin(tilt) * right);
+    // Solve peak(x) = target for x in [0, hi] by bisection; peak(0) at or
+    // over the target leaves x = 0.
+    const auto solve = [&](double hi, auto&& peak, double target) {
+      double lo = 0;
+      if (peak(lo) >= target) return 0.0;
+      if (peak(hi) <= target) return hi;
+      for (int i = 0; i < 30; ++i) {
+        const double x = (lo + hi) / 2;
+        (peak(x) < target ? lo : hi) = x;
+      }
+      return (lo + hi) / 2;
+    };
+    const double end = g.t0 + g.duration;
+    g.shift = sign * solve(
+                         1.0,
+                         [&](double shift) {
+                           trial.segments.back().shift = sign * shift;
+                           return peak_speeds(trial, g.t0, end).first;
+                         },
+                         v_target);
+    trial.segments.back().shift = g.shift;
+    trial.segments.back().axis = g.axis;
+    const double turn_sign = turn_left ? 1 : -1;
+    g.turn = turn_sign * solve(
+                             1.2,
+                             [&](double turn) {
+                               trial.segments.back().turn = turn_sign * turn;
+                               return peak_speeds(trial, g.t0, end).second;
+                             },
+                             w_target);
+    path.segments.push_back(g);
+  }
+  return path;
 }
 
 /// One eased motion of an object between two rest poses on its support:
@@ -612,18 +754,22 @@ inline std::vector<ObjectPlan> plan_objects(int count, int frames, std::uint64_t
 
 }  // namespace detail::room
 
-/// A room with a table and furniture, `moving_objects` objects on the table
-/// and the floor in front of it that start at rest and then move (eased
-/// segments of up to 0.5 m and 60 degrees, peak 0.35 m/s and 50 deg/s,
-/// lifted and tilted on the way, with rests in between), never overlapping
-/// and kept in view, and a hand-held camera 1.8-2.8 m from them.
+/// A room with a table and furniture, `moving_objects` objects (none: a
+/// static room) on the table and the floor in front of it that start at
+/// rest and then move (eased segments of up to 0.5 m and 60 degrees, peak
+/// 0.35 m/s and 50 deg/s, lifted and tilted on the way, with rests in
+/// between), never overlapping and kept in view, and a hand-held camera
+/// 1.8-2.8 m from them (params.camera_path: slow, or with fast segments).
 /// Object k is "<class>_<k+1>": car, cup, book, backpack, teddy_bear,
 /// potted_plant, laptop, bottle.
 template <class S>
 DynamicScene<S> make_dynamic_room(const DynamicSceneParams& params = {}) {
   const char* where = "make_dynamic_room";
-  emfusion::detail::require(params.moving_objects >= 1 && params.moving_objects <= 8, where,
-                            "moving_objects must be in 1..8, got " + std::to_string(params.moving_objects));
+  emfusion::detail::require(params.moving_objects >= 0 && params.moving_objects <= 8, where,
+                            "moving_objects must be in 0..8, got " + std::to_string(params.moving_objects));
+  emfusion::detail::require(
+      params.camera_path == CameraPath::hand_held || params.camera_path == CameraPath::hand_held_fast, where,
+      "camera_path must be hand_held or hand_held_fast, got " + std::to_string(int(params.camera_path)));
   emfusion::detail::require(params.frames >= 1, where, "frames must be >= 1, got " + std::to_string(params.frames));
   emfusion::detail::require(
       params.width >= 16 && params.height >= 16, where,
@@ -634,8 +780,13 @@ DynamicScene<S> make_dynamic_room(const DynamicSceneParams& params = {}) {
   const PinholeCamera<double> camera{
       f, f, (params.width - 1) / 2.0, (params.height - 1) / 2.0, params.width, params.height};
   std::vector<SE3<double>> T_world_camera, T_camera_world;
+  const bool fast = params.camera_path == CameraPath::hand_held_fast;
+  const detail::room::FastPath fast_path =
+      fast && params.moving_camera ? detail::room::plan_fast_path(params.seed, (params.frames - 1) / detail::room::fps)
+                                   : detail::room::FastPath{};
   for (int i = 0; i < params.frames; ++i) {
-    T_world_camera.push_back(detail::room::camera_pose_at(params.moving_camera ? i / detail::room::fps : 0.0));
+    const double t = params.moving_camera ? i / detail::room::fps : 0.0;
+    T_world_camera.push_back(fast ? fast_path.pose(t) : detail::room::camera_pose_at(t));
     T_camera_world.push_back(T_world_camera.back().inverse());
   }
 
