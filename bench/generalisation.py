@@ -42,7 +42,9 @@ sys.path.insert(0, HERE)
 from there_and_back import read_list  # noqa: E402  (the text-list reader both scripts use)
 
 REPO = os.path.dirname(HERE)
-SHARED = os.path.normpath(os.path.join(REPO, '..', 'shared'))
+# The shared folder (generator and redkitchen_300): ../shared beside the checkout, or where
+# EMFUSION_SHARED_DIR says (a machine that has a copy elsewhere, such as the GPU machine).
+SHARED = os.path.normpath(os.environ.get('EMFUSION_SHARED_DIR') or os.path.join(REPO, '..', 'shared'))
 DYNGEN = os.path.join(SHARED, 'tools', 'dyngen.py')
 KITCHEN = os.path.join(SHARED, 'data', 'redkitchen_300')
 
@@ -130,9 +132,17 @@ def base_dir(work, base):
     return os.path.join(work, 'base', base)
 
 
+def generator_python():
+    """The interpreter dyngen runs with: this one when it has numpy, scipy and cv2, else Debian's."""
+    probe = [sys.executable, '-c', 'import numpy, scipy, cv2']
+    if subprocess.run(probe, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL).returncode == 0:
+        return sys.executable
+    return '/usr/bin/python3'
+
+
 def dyngen_command(s, out, base, jobs):
     p = seq_params(s)
-    cmd = ['/usr/bin/python3', DYNGEN, p['kind'], '--out', out, '--frames', str(p['frames']),
+    cmd = [generator_python(), DYNGEN, p['kind'], '--out', out, '--frames', str(p['frames']),
            '--objects', p['objects'], '--seed', str(p['seed']), '--det-every', str(p['det_every']),
            '--p-miss', str(p['p_miss']), '--p-fp', str(p['p_fp']), '--jobs', str(jobs), '--no-preview']
     if p['kind'] == 'composite':
@@ -142,7 +152,7 @@ def dyngen_command(s, out, base, jobs):
 
 def ensure_generator_packages():
     """numpy, scipy and cv2 for /usr/bin/python3 (Debian packages, installed when root)."""
-    probe = ['/usr/bin/python3', '-c', 'import numpy, scipy, cv2']   # the interpreter dyngen runs with
+    probe = [generator_python(), '-c', 'import numpy, scipy, cv2']
     if subprocess.run(probe, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL).returncode == 0:
         return
     if os.geteuid() != 0:
@@ -253,7 +263,7 @@ def labels_summary(seq):
         import cv2  # noqa: F401
         import numpy  # noqa: F401
     except ImportError:
-        subprocess.run(['/usr/bin/python3', os.path.abspath(__file__), '_labels', seq], check=True)
+        subprocess.run([generator_python(), os.path.abspath(__file__), '_labels', seq], check=True)
         return
     write_labels_summary(seq)
 
