@@ -22,7 +22,13 @@ root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 build="$root/build-fuzz"
 seconds="${EMFUSION_FUZZ_SECONDS:-60}"
 jobs="${EMFUSION_JOBS:-$(nproc)}"
-all_targets=(tum_trajectory tum_list calibration intrinsics masks config klg exr png)
+# The targets are the ones tests/fuzz/CMakeLists.txt builds (EMFUSION_FUZZ_TARGETS),
+# read from there so that a new parser's target is fuzzed without a second list.
+read -r -a all_targets < <(sed -n 's/^set(EMFUSION_FUZZ_TARGETS \(.*\))$/\1/p' "$root/tests/fuzz/CMakeLists.txt")
+if [[ ${#all_targets[@]} -eq 0 ]]; then
+  echo "[fuzz] no EMFUSION_FUZZ_TARGETS in $root/tests/fuzz/CMakeLists.txt" >&2
+  exit 1
+fi
 targets=("$@")
 [[ ${#targets[@]} -eq 0 ]] && targets=("${all_targets[@]}")
 
