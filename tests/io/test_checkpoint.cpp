@@ -36,10 +36,16 @@ struct CheckpointScene {
                         vec3(S(0.15), S(0.1), S(0.12))));
     return s;
   }
-  static SystemParams<S> params() {
+  /// The paper's tracking, or (`tracking_options`) with everything that keeps
+  /// state between frames beyond the poses: motion prediction from the last
+  /// two poses, retries from the other start and a depth pyramid.
+  static SystemParams<S> params(bool tracking_options = false) {
     SystemParams<S> p;
     p.background_voxels = 128;
     p.background_voxel_size = S(0.025);
+    p.predict_motion = tracking_options;
+    p.retry_tracking = tracking_options;
+    p.pyramid_levels = tracking_options ? 2 : 1;
     return p;
   }
   /// Frame i into `system`.
@@ -92,12 +98,15 @@ TEMPLATE_LIST_TEST_CASE("Checkpoints: save, load, continue equals the uninterrup
   constexpr int first = 3, total = 7;
   const emfusion::test::ScratchDir dir;
   const std::string path = dir.file("run.emfckpt");
+  const bool tracking_options = GENERATE(false, true);
+  INFO("motion prediction, retries and a pyramid: " << (tracking_options ? "on" : "off"));
+  const SystemParams<S> params = CheckpointScene<S>::params(tracking_options);
 
-  System<S, B> straight(scene.camera, scene.params());
+  System<S, B> straight(scene.camera, params);
   for (int i = 0; i < total; ++i) scene.template feed<B>(straight, i);
 
   {
-    System<S, B> before(scene.camera, scene.params());
+    System<S, B> before(scene.camera, params);
     for (int i = 0; i < first; ++i) scene.template feed<B>(before, i);
     REQUIRE(!before.objects().empty());
     save_checkpoint(path, before);
@@ -105,7 +114,7 @@ TEMPLATE_LIST_TEST_CASE("Checkpoints: save, load, continue equals the uninterrup
     const Checkpoint<S, B> loaded = load_checkpoint<S, B>(path);
     CHECK(checkpoint_bytes(loaded.map, loaded.camera) == emfusion::test::read_bytes(path));
   }
-  System<S, B> resumed(scene.camera, scene.params());
+  System<S, B> resumed(scene.camera, params);
   restore_checkpoint(resumed, path);
   CHECK(resumed.frame_count() == first);
   for (int i = first; i < total; ++i) scene.template feed<B>(resumed, i);
