@@ -64,6 +64,7 @@
 #include "emfusion/io/masks.hpp"
 #include "emfusion/io/pictures.hpp"
 #include "emfusion/io/ply.hpp"
+#include "emfusion/io/run_json.hpp"
 #include "emfusion/io/run_outputs.hpp"
 #include "emfusion/io/trajectory_stream.hpp"
 #include "emfusion/io/tum.hpp"
@@ -322,26 +323,12 @@ void write_object_histories(Json& json, const ObjectHistories& histories, const 
     std::string class_name = "?";
     for (const ObjectRecord& r : records)
       if (r.id == id) class_name = r.class_name;
-    Json object;
-    object["id"] = id;
-    object["class"] = class_name;
-    object["tracked_frames"] = h.tracked;
-    object["refused_frames"] = h.refused;
-    object["retried_frames"] = h.retried;
-    object["from_prediction_frames"] = h.from_prediction;
-    Json& events = object["events"] = Json::array();
+    objects.push_back(object_history_json(h, class_name));
     std::string line;
     for (const ObjectEvent& e : h.events) {
-      Json event;
-      event["event"] = to_string(e.kind);
-      event["frame"] = e.frame;
-      event["timestamp"] = e.timestamp;
-      if (e.kind == ObjectEventKind::deleted || e.kind == ObjectEventKind::lost) event["rule"] = to_string(e.reason);
-      events.push_back(std::move(event));
       line += fmt::format("{}{} {}", line.empty() ? "" : ", ", to_string(e.kind), e.frame);
       if (e.kind == ObjectEventKind::deleted) line += fmt::format(" ({})", to_string(e.reason));
     }
-    objects.push_back(std::move(object));
     fmt::print("object {} ({}): {}; tracked {}, refused {}, retried {}\n", id, class_name,
                line.empty() ? "no events" : line, h.tracked, h.refused, h.retried);
   }
