@@ -18,6 +18,8 @@
 #include <string>
 #include <vector>
 
+#include <fmt/core.h>
+
 #include "emfusion/eval/ate.hpp"
 #include "emfusion/io/run_outputs.hpp"
 #include "emfusion/sim/detector.hpp"
@@ -59,10 +61,10 @@ int run(const Options& o) {
   const B backend{};
   System<S, B> system(seq.camera().cast<S>(), params, backend);
 
-  std::printf("%s, %zu frames of %dx%d, background %d^3 x %.3g m, %d moving objects\n", B::name, seq.size(),
-              p.width, p.height, o.voxels, o.voxel_size, o.objects);
-  std::printf("%8s %10s %12s %11s %6s %8s %8s %10s\n", "frame", "host MiB", "device MiB", "models MiB", "live",
-              "created", "deleted", "ms/frame");
+  fmt::print("{}, {} frames of {}x{}, background {}^3 x {:.3g} m, {} moving objects\n", B::name, seq.size(), p.width,
+             p.height, o.voxels, o.voxel_size, o.objects);
+  fmt::print("{:>8} {:>10} {:>12} {:>11} {:>6} {:>8} {:>8} {:>10}\n", "frame", "host MiB", "device MiB", "models MiB",
+             "live", "created", "deleted", "ms/frame");
   std::vector<Sample> samples;
   std::vector<double> frame_ms;
   int created = 0, deleted = 0;
@@ -81,8 +83,8 @@ int run(const Options& o) {
       std::vector<double> recent(frame_ms.end() - std::min<std::ptrdiff_t>(std::ptrdiff_t(frame_ms.size()), o.sample_every),
                                  frame_ms.end());
       std::sort(recent.begin(), recent.end());
-      std::printf("%8d %10.1f %12.1f %11.1f %6d %8d %8d %10.2f\n", s.frame, s.host_mib, s.device_mib, s.model_mib,
-                  s.live_objects, s.created, s.deleted, recent.empty() ? 0.0 : recent[recent.size() / 2]);
+      fmt::print("{:8} {:10.1f} {:12.1f} {:11.1f} {:6} {:8} {:8} {:10.2f}\n", s.frame, s.host_mib, s.device_mib,
+                 s.model_mib, s.live_objects, s.created, s.deleted, recent.empty() ? 0.0 : recent[recent.size() / 2]);
       std::fflush(stdout);
     }
   }
@@ -93,47 +95,56 @@ int run(const Options& o) {
   if (first != samples.end()) {
     host_growth = samples.back().host_mib - first->host_mib;
     device_growth = samples.back().device_mib - first->device_mib;
-    std::printf("growth from frame %d to %d: host %+.1f MiB, device %+.1f MiB, models %+.1f MiB\n", first->frame,
-                samples.back().frame, host_growth, device_growth, samples.back().model_mib - first->model_mib);
+    fmt::print("growth from frame {} to {}: host {:+.1f} MiB, device {:+.1f} MiB, models {:+.1f} MiB\n", first->frame,
+               samples.back().frame, host_growth, device_growth, samples.back().model_mib - first->model_mib);
     // On the CPU the models are host memory: what the process holds beyond
     // them should stay flat.
     if (!B::is_device) {
       double low = 1e300, high = -1e300;
       for (auto s = first; s != samples.end(); ++s)
         low = std::min(low, s->host_mib - s->model_mib), high = std::max(high, s->host_mib - s->model_mib);
-      std::printf("host memory beyond the models from frame %d on: %.1f to %.1f MiB\n", first->frame, low, high);
+      fmt::print("host memory beyond the models from frame {} on: {:.1f} to {:.1f} MiB\n", first->frame, low, high);
     }
   } else {
-    std::printf("no sample at or after the warm-up (frame %d): growth not measured\n", o.warmup);
+    fmt::print("no sample at or after the warm-up (frame {}): growth not measured\n", o.warmup);
   }
 
-  JsonWriter json;
-  json.begin().string("backend", B::name).integer("frames", (long long)seq.size());
-  json.integer("width", p.width).integer("height", p.height).integer("objects", o.objects);
-  json.integer("background_voxels", o.voxels).number("background_voxel_size_m", o.voxel_size);
-  json.integer("warmup", o.warmup).number("host_growth_mib", host_growth).number("device_growth_mib", device_growth);
-  json.number("peak_host_mib", bench::peak_host_mib());
-  json.begin("samples");
-  for (const Sample& s : samples)
-    json.begin(std::to_string(s.frame)).number("host_mib", s.host_mib).number("device_mib", s.device_mib)
-        .number("model_mib", s.model_mib)
-        .integer("live_objects", s.live_objects).integer("created", s.created).integer("deleted", s.deleted).end();
-  json.end();
+  Json json;
+  json["backend"] = B::name;
+  json["frames"] = seq.size();
+  json["width"] = p.width;
+  json["height"] = p.height;
+  json["objects"] = o.objects;
+  json["background_voxels"] = o.voxels;
+  json["background_voxel_size_m"] = o.voxel_size;
+  json["warmup"] = o.warmup;
+  json["host_growth_mib"] = host_growth;
+  json["device_growth_mib"] = device_growth;
+  json["peak_host_mib"] = bench::peak_host_mib();
+  Json& sampled = json["samples"] = Json::object();  // keyed by frame
+  for (const Sample& s : samples) {
+    Json& entry = sampled[std::to_string(s.frame)] = Json::object();
+    entry["host_mib"] = s.host_mib;
+    entry["device_mib"] = s.device_mib;
+    entry["model_mib"] = s.model_mib;
+    entry["live_objects"] = s.live_objects;
+    entry["created"] = s.created;
+    entry["deleted"] = s.deleted;
+  }
   if (system.camera_trajectory().size() >= 3) {  // the ATE needs three poses
     const auto ate = eval::absolute_trajectory_error(system.camera_trajectory(), seq.scene().camera_trajectory());
-    std::printf("camera ATE %.2f cm over %zu frames\n", 100 * ate.rmse, seq.size());
-    json.number("camera_ate_m", ate.rmse);
+    fmt::print("camera ATE {:.2f} cm over {} frames\n", 100 * ate.rmse, seq.size());
+    json["camera_ate_m"] = ate.rmse;
     std::map<std::string, Trajectory> truth;
     for (int k = 0; k < seq.scene().object_count(); ++k)
       truth[seq.scene().object_name(k)] = seq.scene().object_trajectory(k);
     bench::report_objects(system, seq.scene().camera_trajectory(), truth, json);
   }
-  json.end();
-  if (!o.json.empty()) write_text_file(o.json, json.str());
+  if (!o.json.empty()) write_json_file(o.json, json);
 
   if (o.max_growth_mib >= 0 && (host_growth > o.max_growth_mib || device_growth > o.max_growth_mib)) {
-    std::fprintf(stderr, "bench_longrun: memory grew by more than %.1f MiB after frame %d (host %+.1f, device %+.1f)\n",
-                 o.max_growth_mib, o.warmup, host_growth, device_growth);
+    fmt::print(stderr, "bench_longrun: memory grew by more than {:.1f} MiB after frame {} (host {:+.1f}, device {:+.1f})\n",
+               o.max_growth_mib, o.warmup, host_growth, device_growth);
     return 2;
   }
   return 0;
@@ -161,7 +172,7 @@ int main(int argc, char** argv) {
     examples::with_backend(o.backend, [&](auto backend) { status = run<decltype(backend)>(o); });
     return status;
   } catch (const std::exception& e) {
-    std::fprintf(stderr, "bench_longrun: error: %s\n", e.what());
+    fmt::print(stderr, "bench_longrun: error: {}\n", e.what());
     return 1;
   }
 }

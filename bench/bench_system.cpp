@@ -22,6 +22,8 @@
 #include <string>
 #include <vector>
 
+#include <fmt/core.h>
+
 #include "emfusion/eval/ate.hpp"
 #include "emfusion/io/masks.hpp"
 #include "emfusion/io/run_outputs.hpp"
@@ -76,15 +78,19 @@ void run(const Options& o) {
     device_peak = std::max(device_peak, bench::device_used_mib<B>());
   }
 
-  JsonWriter json;
-  json.begin().string("backend", B::name).string("input", o.sequence.empty() ? "synthetic" : o.sequence);
-  json.integer("frames", (long long)w.depth.size()).integer("width", w.camera.width).integer("height", w.camera.height);
-  json.integer("background_voxels", o.voxels).number("background_voxel_size_m", o.voxel_size);
-  json.integer("max_live_objects", max_objects);
-  std::printf("%s, %zu frames of %dx%d, background %d^3 x %.3g m, up to %d live objects\n", B::name, w.depth.size(),
-              w.camera.width, w.camera.height, o.voxels, o.voxel_size, max_objects);
-  std::printf("%-18s %10s %10s\n", "stage (ms)", "median", "p90");
-  json.begin("timings_ms");
+  Json json;
+  json["backend"] = B::name;
+  json["input"] = o.sequence.empty() ? "synthetic" : o.sequence;
+  json["frames"] = w.depth.size();
+  json["width"] = w.camera.width;
+  json["height"] = w.camera.height;
+  json["background_voxels"] = o.voxels;
+  json["background_voxel_size_m"] = o.voxel_size;
+  json["max_live_objects"] = max_objects;
+  fmt::print("{}, {} frames of {}x{}, background {}^3 x {:.3g} m, up to {} live objects\n", B::name, w.depth.size(),
+             w.camera.width, w.camera.height, o.voxels, o.voxel_size, max_objects);
+  fmt::print("{:<18} {:>10} {:>10}\n", "stage (ms)", "median", "p90");
+  Json& timings = json["timings_ms"] = Json::object();
   const std::pair<const char*, double StageTimes::*> stages[] = {
       {"preprocess", &StageTimes::preprocess},   {"e_step", &StageTimes::e_step},
       {"track_background", &StageTimes::track_background}, {"track_objects", &StageTimes::track_objects},
@@ -95,21 +101,22 @@ void run(const Options& o) {
     std::vector<double> v;
     for (const StageTimes& t : times) v.push_back(t.*field);
     const Stats s = stats(v);
-    std::printf("%-18s %10.2f %10.2f\n", name, s.median, s.p90);
-    json.begin(name).number("median", s.median).number("p90", s.p90).end();
+    fmt::print("{:<18} {:10.2f} {:10.2f}\n", name, s.median, s.p90);
+    Json& entry = timings[name] = Json::object();
+    entry["median"] = s.median;
+    entry["p90"] = s.p90;
   }
-  json.end();
   const double host = bench::peak_host_mib(), device = device_peak - device_before;
-  std::printf("peak host memory %.0f MiB; device memory used by the system %.0f MiB\n", host, device);
-  json.number("peak_host_mib", host).number("device_mib", device);
+  fmt::print("peak host memory {:.0f} MiB; device memory used by the system {:.0f} MiB\n", host, device);
+  json["peak_host_mib"] = host;
+  json["device_mib"] = device;
   if (w.camera_truth && system.camera_trajectory().size() >= 3) {
     const auto ate = eval::absolute_trajectory_error(system.camera_trajectory(), *w.camera_truth);
-    std::printf("camera ATE %.2f cm\n", 100 * ate.rmse);
-    json.number("camera_ate_m", ate.rmse);
+    fmt::print("camera ATE {:.2f} cm\n", 100 * ate.rmse);
+    json["camera_ate_m"] = ate.rmse;
     bench::report_objects(system, *w.camera_truth, w.object_truth, json);
   }
-  json.end();
-  if (!o.json.empty()) write_text_file(o.json, json.str());
+  if (!o.json.empty()) write_json_file(o.json, json);
 }
 
 }  // namespace
@@ -131,7 +138,7 @@ int main(int argc, char** argv) {
     examples::with_backend(o.backend, [&](auto backend) { run<decltype(backend)>(o); });
     return 0;
   } catch (const std::exception& e) {
-    std::fprintf(stderr, "bench_system: error: %s\n", e.what());
+    fmt::print(stderr, "bench_system: error: {}\n", e.what());
     return 1;
   }
 }

@@ -21,7 +21,10 @@
 #include <string>
 #include <vector>
 
+#include <fmt/core.h>
+
 #include "emfusion/core/half.hpp"
+#include "emfusion/io/run_outputs.hpp"
 #include "emfusion/sim/primitives.hpp"
 #include "emfusion/sim/render.hpp"
 #include "emfusion/volume/integrate.hpp"
@@ -65,7 +68,7 @@ sim::Scene<S> room(const SE3<S>& T_world_camera) {
 }
 
 template <class B, class Store>
-void run(const Options& o, std::FILE* json, bool& first) {
+void run(const Options& o, Json* json) {
   const B backend{};
   const PinholeCamera<S> camera{};
   const SE3<S> T_world_camera = SE3<S>::identity();
@@ -100,18 +103,26 @@ void run(const Options& o, std::FILE* json, bool& first) {
   for (std::size_t i = 0; i < truth.size(); ++i)
     if (truth[i] > S(0) && cast_depth[i] > S(0)) error_mm.push_back(1000.0 * std::fabs(double(cast_depth[i] - truth[i])));
   const Stats se = error_mm.empty() ? Stats{} : stats(error_mm);
-  std::printf("%-5s %-5s %4d^3 (%6.0f MiB)  integrate median %8.2f ms  p90 %8.2f ms | raycast median %8.2f ms  p90 %8.2f ms"
-              " | depth error median %.3f mm  p90 %.3f mm\n",
-              B::name, o.store.c_str(), o.voxels, volume.memory_bytes() / 1048576.0, si.median, si.p90, sr.median,
-              sr.p90, se.median, se.p90);
+  fmt::print("{:<5} {:<5} {:4}^3 ({:6.0f} MiB)  integrate median {:8.2f} ms  p90 {:8.2f} ms | raycast median {:8.2f} ms  "
+             "p90 {:8.2f} ms | depth error median {:.3f} mm  p90 {:.3f} mm\n",
+             B::name, o.store, o.voxels, double(volume.memory_bytes()) / 1048576.0, si.median, si.p90, sr.median, sr.p90,
+             se.median, se.p90);
   if (json) {
-    std::fprintf(json,
-                 "%s  {\"backend\": \"%s\", \"store\": \"%s\", \"voxels\": %d, \"repeats\": %d, \"integrate_ms\": "
-                 "{\"median\": %.3f, \"p90\": %.3f}, \"raycast_ms\": {\"median\": %.3f, \"p90\": %.3f}, "
-                 "\"depth_error_mm\": {\"median\": %.4f, \"p90\": %.4f}}",
-                 first ? "" : ",\n", B::name, o.store.c_str(), o.voxels, o.repeats, si.median, si.p90, sr.median, sr.p90,
-                 se.median, se.p90);
-    first = false;
+    const auto statistics = [](const Stats& s) {
+      Json entry;
+      entry["median"] = s.median;
+      entry["p90"] = s.p90;
+      return entry;
+    };
+    Json entry;
+    entry["backend"] = B::name;
+    entry["store"] = o.store;
+    entry["voxels"] = o.voxels;
+    entry["repeats"] = o.repeats;
+    entry["integrate_ms"] = statistics(si);
+    entry["raycast_ms"] = statistics(sr);
+    entry["depth_error_mm"] = statistics(se);
+    json->push_back(std::move(entry));
   }
 }
 
@@ -139,21 +150,22 @@ Options parse(int argc, char** argv) {
 int main(int argc, char** argv) {
   try {
     const Options o = parse(argc, argv);
-    std::FILE* json = o.json.empty() ? nullptr : std::fopen(o.json.c_str(), "w");
-    if (!o.json.empty() && !json) throw std::runtime_error("cannot write '" + o.json + "'");
-    if (json) std::fprintf(json, "[\n");
-    bool first = true;
+    // One entry per backend run, as an array; an empty one is written
+    // first so that an unwritable --json fails before the timing starts.
+    Json results = Json::array();
+    Json* json = o.json.empty() ? nullptr : &results;
+    if (json) write_json_file(o.json, results);
     const bool half = o.store == "half";
-    if (o.backend != "cuda") half ? run<Host, Half>(o, json, first) : run<Host, S>(o, json, first);
+    if (o.backend != "cuda") half ? run<Host, Half>(o, json) : run<Host, S>(o, json);
 #if EMFUSION_HAS_CUDA
-    if (o.backend != "cpu") half ? run<Cuda, Half>(o, json, first) : run<Cuda, S>(o, json, first);
+    if (o.backend != "cpu") half ? run<Cuda, Half>(o, json) : run<Cuda, S>(o, json);
 #else
     if (o.backend == "cuda") throw std::invalid_argument("this build has no CUDA backend");
 #endif
-    if (json) std::fprintf(json, "\n]\n"), std::fclose(json);
+    if (json) write_json_file(o.json, results);
     return 0;
   } catch (const std::exception& e) {
-    std::fprintf(stderr, "bench_volume: error: %s\n", e.what());
+    fmt::print(stderr, "bench_volume: error: {}\n", e.what());
     return 1;
   }
 }

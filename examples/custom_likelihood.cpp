@@ -25,6 +25,8 @@
 #include <string>
 #include <vector>
 
+#include <fmt/core.h>
+
 #include "emfusion/eval/ate.hpp"
 #include "emfusion/eval/object_matching.hpp"
 #include "emfusion/slam/system.hpp"
@@ -90,9 +92,7 @@ Errors run(const examples::Workload& w, Sys& system, const B& backend) {
 
 std::string cell(const eval::ObjectEvaluation* o) {
   if (!o || !o->evaluated) return "-";
-  char text[64];
-  std::snprintf(text, sizeof(text), "%.2f cm (%.0f %%)", 100 * o->result.ate.rmse, 100 * o->result.coverage);
-  return text;
+  return fmt::format("{:.2f} cm ({:.0f} %)", 100 * o->result.ate.rmse, 100 * o->result.coverage);
 }
 
 template <class B>
@@ -117,13 +117,13 @@ void compare(const Options& o) {
   Custom custom(camera, params, backend, parts);
   const Errors c = run(w, custom, backend);
 
-  std::printf("%zu frames of %s on %s\n", w.depth.size(), o.sequence.empty() ? "synthetic:room-small" : o.sequence.c_str(),
-              B::name);
-  std::printf("%-16s %-22s %-22s\n", "", "paper (eq. 7)", "depth-scaled Laplace");
-  std::printf("%-16s %-22.2f %-22.2f (ATE cm)\n", "camera", 100 * p.camera, 100 * c.camera);
+  fmt::print("{} frames of {} on {}\n", w.depth.size(), o.sequence.empty() ? "synthetic:room-small" : o.sequence,
+             B::name);
+  fmt::print("{:<16} {:<22} {:<22}\n", "", "paper (eq. 7)", "depth-scaled Laplace");
+  fmt::print("{:<16} {:<22.2f} {:<22.2f} (ATE cm)\n", "camera", 100 * p.camera, 100 * c.camera);
   for (const auto& [name, truth] : w.object_truth) {
     const auto find = [&](const Errors& e) { return e.objects.count(name) ? &e.objects.at(name) : nullptr; };
-    std::printf("%-16s %-22s %-22s\n", name.c_str(), cell(find(p)).c_str(), cell(find(c)).c_str());
+    fmt::print("{:<16} {:<22} {:<22}\n", name, cell(find(p)), cell(find(c)));
   }
 }
 
@@ -152,7 +152,7 @@ int main(int argc, char** argv) {
     examples::with_backend(o.backend, [&](auto backend) { compare<decltype(backend)>(o); });
     return 0;
   } catch (const std::exception& e) {
-    std::fprintf(stderr, "custom_likelihood: error: %s\n", e.what());
+    fmt::print(stderr, "custom_likelihood: error: {}\n", e.what());
     return 1;
   }
 }

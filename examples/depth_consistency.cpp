@@ -18,6 +18,8 @@
 #include <string>
 #include <vector>
 
+#include <fmt/core.h>
+
 #include "emfusion/eval/depth_consistency.hpp"
 #include "emfusion/eval/trajectory.hpp"
 #include "emfusion/io/tum.hpp"
@@ -107,10 +109,10 @@ void run(const Options& o, const B& backend) {
     back_project(filtered, camera, points);
     sum += eval::depth_residuals(volume, points, pose(i), S(o.max_abs), S(0.005));
   }
-  std::printf("fused frames %d-%d (%zu with a pose), checked frames %d-%d (%zu with a pose) on %s\n", fuse.first,
-              fuse.end - 1, fused.size(), check.first, check.end - 1, checked.size(), B::name);
-  std::printf("%.0f points within %.3f m of the map: mean |SDF| %.2f mm, RMS %.2f mm, %.1f %% within 5 mm\n",
-              sum.points, o.max_abs, 1e3 * sum.mean_abs(), 1e3 * sum.rms(), 100.0 * sum.share_within());
+  fmt::print("fused frames {}-{} ({} with a pose), checked frames {}-{} ({} with a pose) on {}\n", fuse.first,
+             fuse.end - 1, fused.size(), check.first, check.end - 1, checked.size(), B::name);
+  fmt::print("{:.0f} points within {:.3f} m of the map: mean |SDF| {:.2f} mm, RMS {:.2f} mm, {:.1f} % within 5 mm\n",
+             sum.points, o.max_abs, 1e3 * sum.mean_abs(), 1e3 * sum.rms(), 100.0 * sum.share_within());
 }
 
 Options parse(int argc, char** argv) {
@@ -139,7 +141,7 @@ int main(int argc, char** argv) {
     examples::with_backend(o.backend, [&](const auto& backend) { run(o, backend); });
     return 0;
   } catch (const std::exception& e) {
-    std::fprintf(stderr, "depth_consistency: error: %s\n", e.what());
+    fmt::print(stderr, "depth_consistency: error: {}\n", e.what());
     return 1;
   }
 }

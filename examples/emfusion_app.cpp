@@ -51,6 +51,7 @@
 #include <vector>
 
 #include <CLI/CLI.hpp>
+#include <fmt/core.h>
 
 #include "emfusion/eval/ate.hpp"
 #include "emfusion/eval/object_matching.hpp"
@@ -63,6 +64,7 @@
 #include "emfusion/io/masks.hpp"
 #include "emfusion/io/pictures.hpp"
 #include "emfusion/io/ply.hpp"
+#include "emfusion/io/run_json.hpp"
 #include "emfusion/io/run_outputs.hpp"
 #include "emfusion/io/trajectory_stream.hpp"
 #include "emfusion/io/tum.hpp"
@@ -283,10 +285,10 @@ Input open_input(const RunOptions& o) {
     }
     if (kind == InputKind::Klg && !camera) {
       const PinholeCamera<double>& c = in.camera;
-      std::fprintf(stderr,
-                   "emfusion: '%s' holds no intrinsics and neither --calibration nor --intrinsics is given: using the "
-                   "default preset (fx %g, fy %g, cx %g, cy %g, %dx%d)\n",
-                   o.input.c_str(), c.fx, c.fy, c.cx, c.cy, c.width, c.height);
+      fmt::print(stderr,
+                 "emfusion: '{}' holds no intrinsics and neither --calibration nor --intrinsics is given: using the "
+                 "default preset (fx {:g}, fy {:g}, cx {:g}, cy {:g}, {}x{})\n",
+                 o.input, c.fx, c.fy, c.cx, c.cy, c.width, c.height);
     }
   }
   // Masks: --masks, else <input>/masks of a directory input when it has a masks.txt.
@@ -315,66 +317,59 @@ std::pair<double, double> median_p90(std::vector<double> v) {
 /// run.json's "objects": per object its class, tracking counts and events
 /// (docs/io.md, "run.json"); and one line per object on stdout, e.g.
 /// "object 3 (cup): created 12, lost 150, found_again 171; tracked 270, refused 2, retried 1".
-void write_object_histories(JsonWriter& json, const ObjectHistories& histories,
-                            const std::vector<ObjectRecord>& records) {
-  json.begin_array("objects");
+void write_object_histories(Json& json, const ObjectHistories& histories, const std::vector<ObjectRecord>& records) {
+  Json& objects = json["objects"] = Json::array();
   for (const auto& [id, h] : histories.objects()) {
     std::string class_name = "?";
     for (const ObjectRecord& r : records)
       if (r.id == id) class_name = r.class_name;
-    json.begin().integer("id", id).string("class", class_name);
-    json.integer("tracked_frames", h.tracked).integer("refused_frames", h.refused);
-    json.integer("retried_frames", h.retried).integer("from_prediction_frames", h.from_prediction);
-    json.begin_array("events");
+    objects.push_back(object_history_json(h, class_name));
     std::string line;
     for (const ObjectEvent& e : h.events) {
-      json.begin().string("event", to_string(e.kind)).integer("frame", e.frame).number("timestamp", e.timestamp);
-      if (e.kind == ObjectEventKind::deleted || e.kind == ObjectEventKind::lost) json.string("rule", to_string(e.reason));
-      json.end();
-      line += (line.empty() ? "" : ", ") + std::string(to_string(e.kind)) + " " + std::to_string(e.frame);
-      if (e.kind == ObjectEventKind::deleted) line += std::string(" (") + to_string(e.reason) + ")";
+      line += fmt::format("{}{} {}", line.empty() ? "" : ", ", to_string(e.kind), e.frame);
+      if (e.kind == ObjectEventKind::deleted) line += fmt::format(" ({})", to_string(e.reason));
     }
-    json.end_array().end();
-    std::printf("object %d (%s): %s; tracked %d, refused %d, retried %d\n", id, class_name.c_str(),
-                line.empty() ? "no events" : line.c_str(), h.tracked, h.refused, h.retried);
+    fmt::print("object {} ({}): {}; tracked {}, refused {}, retried {}\n", id, class_name,
+               line.empty() ? "no events" : line, h.tracked, h.refused, h.retried);
   }
-  json.end_array();
 }
 
 void print_evaluation(const Trajectory& est_cam, const std::map<int, Trajectory>& est_objects, const GroundTruth& gt,
-                      JsonWriter* json) {
+                      Json* json) {
   if (est_cam.size() < 3) {
-    std::printf("camera: fewer than 3 poses, no evaluation\n");
+    fmt::print("camera: fewer than 3 poses, no evaluation\n");
     return;
   }
   const auto ate = eval::absolute_trajectory_error(est_cam, gt.camera);
   // RPE needs pose pairs 1 s apart: short runs have none.
   const bool has_rpe = est_cam.back().timestamp - est_cam.front().timestamp >= 1.0;
   const double rpe = has_rpe ? eval::relative_pose_error(est_cam, gt.camera).translation_rmse : NAN;
-  char rpe_text[64] = "- (run shorter than 1 s)";
-  if (has_rpe) std::snprintf(rpe_text, sizeof(rpe_text), "%.2f cm/s", 100 * rpe);
-  std::printf("camera: ATE RMSE %.2f cm over %zu poses, RPE RMSE %s\n", 100 * ate.rmse, ate.matched, rpe_text);
+  const std::string rpe_text = has_rpe ? fmt::format("{:.2f} cm/s", 100 * rpe) : "- (run shorter than 1 s)";
+  fmt::print("camera: ATE RMSE {:.2f} cm over {} poses, RPE RMSE {}\n", 100 * ate.rmse, ate.matched, rpe_text);
   if (json) {
-    json->begin("camera").number("ate_rmse_m", ate.rmse).integer("poses", (long long)ate.matched);
-    json->number("rpe_rmse_m_per_s", rpe).end();
+    Json& camera = (*json)["camera"] = Json::object();
+    camera["ate_rmse_m"] = ate.rmse;
+    camera["poses"] = ate.matched;
+    camera["rpe_rmse_m_per_s"] = rpe;  // NaN (no RPE) is written as null
   }
   if (gt.objects.empty()) return;
   const auto objects = eval::evaluate_objects(est_cam, gt.camera, est_objects, gt.objects);
-  std::printf("%-16s %-10s %12s %10s\n", "object", "estimate", "ATE RMSE", "coverage");
-  if (json) json->begin("objects");
+  fmt::print("{:<16} {:<10} {:>12} {:>10}\n", "object", "estimate", "ATE RMSE", "coverage");
+  Json* evaluated = json ? &((*json)["objects"] = Json::object()) : nullptr;
   for (const auto& o : objects) {
     if (o.evaluated)
-      std::printf("%-16s %-10d %9.2f cm %9.0f %%\n", o.name.c_str(), o.primary, 100 * o.result.ate.rmse,
-                  100 * o.result.coverage);
+      fmt::print("{:<16} {:<10} {:9.2f} cm {:9.0f} %\n", o.name, o.primary, 100 * o.result.ate.rmse,
+                 100 * o.result.coverage);
     else
-      std::printf("%-16s %-10s %12s %10s  (%s)\n", o.name.c_str(), "-", "-", "0 %", o.problem.c_str());
-    if (json) {
-      json->begin(o.name).integer("estimate", o.primary).boolean("evaluated", o.evaluated);
-      json->number("ate_rmse_m", o.evaluated ? o.result.ate.rmse : NAN);
-      json->number("coverage", o.evaluated ? o.result.coverage : 0.0).end();
+      fmt::print("{:<16} {:<10} {:>12} {:>10}  ({})\n", o.name, "-", "-", "0 %", o.problem);
+    if (evaluated) {
+      Json& object = (*evaluated)[o.name] = Json::object();
+      object["estimate"] = o.primary;
+      object["evaluated"] = o.evaluated;
+      object["ate_rmse_m"] = o.evaluated ? o.result.ate.rmse : NAN;
+      object["coverage"] = o.evaluated ? o.result.coverage : 0.0;
     }
   }
-  if (json) json->end();
 }
 
 /// The pictures of one frame (docs/user-guide.md section 4): the rendered
@@ -382,8 +377,7 @@ void print_evaluation(const Trajectory& est_cam, const std::map<int, Trajectory>
 template <class B>
 void write_pictures(const std::string& dir, std::size_t frame, const std::optional<ColourImage>& colour,
                     const System<S, B>& system, const FrameResult& result) {
-  char number[24];  // room for any size_t: g++ -Wformat-truncation checks it
-  std::snprintf(number, sizeof(number), "%06zu", frame);
+  const std::string number = fmt::format("{:06}", frame);
   const ColourImage* c = colour ? &*colour : nullptr;
   // The segmentation and the association images of this frame were made
   // before its deletions and creations: label (model) k + 1 is the k-th
@@ -391,12 +385,12 @@ void write_pictures(const std::string& dir, std::size_t frame, const std::option
   std::vector<int> ids;
   for (const ObjectStatus& st : result.object_status) ids.push_back(st.id);
   const Image<int, Host> seg = system.segmentation().template to<Host>();
-  write_png((fs::path(dir) / ("segmentation_" + std::string(number) + ".png")).string(),
+  write_png((fs::path(dir) / ("segmentation_" + number + ".png")).string(),
             segmentation_overlay(c, seg, 0.5f, &ids));
   const auto& q = system.associations();
   for (int m = 0; m < q.model_count() && m <= int(ids.size()); ++m) {
     const std::string model = m == 0 ? "background" : "object_" + std::to_string(ids[std::size_t(m - 1)]);
-    write_png((fs::path(dir) / ("association_" + std::string(number) + "_" + model + ".png")).string(),
+    write_png((fs::path(dir) / ("association_" + number + "_" + model + ".png")).string(),
               association_heatmap(q.image(m).template to<Host>(), c));
   }
 }
@@ -535,27 +529,29 @@ void run(const RunOptions& o) {
     if (first > frames)
       throw std::runtime_error("'" + from + "' has " + std::to_string(first) + " frames processed, but '" + o.input +
                                "' gives only " + std::to_string(frames));
-    std::fprintf(stderr, "emfusion: resuming from '%s' at frame %zu\n", from.c_str(), first);
+    fmt::print(stderr, "emfusion: resuming from '{}' at frame {}\n", from, first);
   }
   const std::string checkpoint = (out / "checkpoint.emfckpt").string();
   // run.json is written before the first frame, saying "running", and
   // replaced at the end: one that still says so is a run killed on the way.
-  const auto run_summary = [&](JsonWriter& json, const char* status, std::size_t processed) {
-    json.begin().string("input", o.input).string("backend", B::name).string("detector", in.detector);
-    json.string("status", status).integer("frames", (long long)processed);
-    json.integer("frames_requested", (long long)frames);
+  const auto run_summary = [&](const char* status, std::size_t processed) {
+    Json json;
+    json["input"] = o.input;
+    json["backend"] = B::name;
+    json["detector"] = in.detector;
+    json["status"] = status;
+    json["frames"] = processed;
+    json["frames_requested"] = frames;
+    return json;
   };
-  const auto settings = [&](JsonWriter& json) {
-    json.begin("settings");
-    for (const auto& e : parameter_table<S>()) json.string(e.name, e.get(system.params()));
-    json.end();
+  const auto settings = [&](Json& json) {
+    Json& values = json["settings"] = Json::object();
+    for (const auto& e : parameter_table<S>()) values[e.name] = e.get(system.params());
   };
   {
-    JsonWriter json;
-    run_summary(json, "running", 0);
+    Json json = run_summary("running", 0);
     settings(json);
-    json.end();
-    write_text_file((out / "run.json").string(), json.str());
+    write_json_file((out / "run.json").string(), json);
   }
   StreamedOutputs streams(o.output);
   // The trajectories so far, from the checkpoint: the files come out as
@@ -584,43 +580,42 @@ void run(const RunOptions& o) {
     times.push_back(r.times);
     if (o.pictures) write_pictures(pictures, i, in.colour(i), system, r);
     if (o.verbose) {
-      for (const int id : r.created) std::fprintf(stderr, "%sframe %zu: created object %d\n", tty ? "\n" : "", i, id);
-      for (const int id : r.reidentified)
-        std::fprintf(stderr, "%sframe %zu: re-identified lost object %d\n", tty ? "\n" : "", i, id);
+      // On a terminal, each message starts a line of its own after the progress line.
+      const char* const nl = tty ? "\n" : "";
+      for (const int id : r.created) fmt::print(stderr, "{}frame {}: created object {}\n", nl, i, id);
+      for (const int id : r.reidentified) fmt::print(stderr, "{}frame {}: re-identified lost object {}\n", nl, i, id);
       for (const int id : r.deleted)
         for (const ObjectRecord& rec : system.object_records())
           if (rec.id == id)
-            std::fprintf(stderr, "%sframe %zu: deleted object %d (%s): %s\n", tty ? "\n" : "", i, id,
-                         rec.class_name.c_str(), to_string(rec.reason));
+            fmt::print(stderr, "{}frame {}: deleted object {} ({}): {}\n", nl, i, id, rec.class_name,
+                       to_string(rec.reason));
       // Frames the system refused to map, and detections it ignored (docs/system.md, "Hostile input").
       if (r.camera_tracking != TrackingOutcome::tracked && r.camera_tracking != TrackingOutcome::not_tracked)
-        std::fprintf(stderr, "%sframe %zu: camera %s (step %.3f m, %.1f deg, %d valid depth pixels), frame not mapped\n",
-                     tty ? "\n" : "", i, to_string(r.camera_tracking), r.camera_step.translation,
-                     r.camera_step.rotation * 180.0 / 3.14159265358979323846, r.depth.valid);
+        fmt::print(stderr, "{}frame {}: camera {} (step {:.3f} m, {:.1f} deg, {} valid depth pixels), frame not mapped\n",
+                   nl, i, to_string(r.camera_tracking), r.camera_step.translation,
+                   r.camera_step.rotation * 180.0 / 3.14159265358979323846, r.depth.valid);
       if (r.invalid_detections > 0 || r.detections_over_cap > 0)
-        std::fprintf(stderr, "%sframe %zu: %d detections ignored (unusable label or score), %d over the object cap\n",
-                     tty ? "\n" : "", i, r.invalid_detections, r.detections_over_cap);
+        fmt::print(stderr, "{}frame {}: {} detections ignored (unusable label or score), {} over the object cap\n", nl,
+                   i, r.invalid_detections, r.detections_over_cap);
     }
     const double elapsed = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     const double fps = double(i + 1 - first) / elapsed;
     if (tty) {
       const int width = 30, done = int(width * double(i + 1) / double(frames));
       const long left = std::lround(double(frames - i - 1) / fps);
-      std::fprintf(stderr, "\r[%s%s] %zu/%zu  %.1f fps  %ld:%02ld left  %d objects ",
-                   std::string(std::size_t(done), '#').c_str(), std::string(std::size_t(width - done), '.').c_str(),
-                   i + 1, frames, fps, left / 60, left % 60, r.live_objects);
-      if (i + 1 == frames) std::fprintf(stderr, "\n");
+      fmt::print(stderr, "\r[{}{}] {}/{}  {:.1f} fps  {}:{:02} left  {} objects ", std::string(std::size_t(done), '#'),
+                 std::string(std::size_t(width - done), '.'), i + 1, frames, fps, left / 60, left % 60, r.live_objects);
+      if (i + 1 == frames) fmt::print(stderr, "\n");
     } else if ((i + 1) % 30 == 0 || i + 1 == frames) {
-      std::fprintf(stderr, "frame %zu/%zu: %.1f fps, %d objects\n", i + 1, frames, fps, r.live_objects);
+      fmt::print(stderr, "frame {}/{}: {:.1f} fps, {} objects\n", i + 1, frames, fps, r.live_objects);
     }
   }
   const int sig = examples::interrupt_signal();
   const bool interrupted = processed < frames;
   if (interrupted)
-    std::fprintf(
-        stderr,
-        "%semfusion: %s: stopped after %zu of %zu frames; writing the outputs (a second signal stops at once)\n",
-        tty ? "\n" : "", examples::signal_name(sig), processed, frames);
+    fmt::print(stderr,
+               "{}emfusion: {}: stopped after {} of {} frames; writing the outputs (a second signal stops at once)\n",
+               tty ? "\n" : "", examples::signal_name(sig), processed, frames);
 
   // Outputs (FORMATS.md section 5): the trajectories are complete already.
   streams.close();
@@ -632,22 +627,23 @@ void run(const RunOptions& o) {
     if (!r.person) est_objects[r.id] = r.trajectory;
   write_meshes(out / "meshes", system.map());
 
-  JsonWriter json;
-  run_summary(json, interrupted ? "interrupted" : "finished", processed);
+  Json json = run_summary(interrupted ? "interrupted" : "finished", processed);
   if (interrupted) {
-    json.string("signal", examples::signal_name(sig));
+    json["signal"] = examples::signal_name(sig);
     // The last frame processed: its index in the input and its timestamp.
-    json.integer("last_frame", (long long)processed - 1);
-    json.number("last_timestamp", processed > 0 ? in.timestamp(processed - 1) : NAN);
+    json["last_frame"] = (long long)processed - 1;
+    json["last_timestamp"] = processed > 0 ? in.timestamp(processed - 1) : NAN;
   }
-  json.integer("objects_created", (long long)list.size());
+  json["objects_created"] = list.size();
   settings(json);
-  json.begin("timings_ms");
+  Json& timings = json["timings_ms"] = Json::object();
   const auto stage = [&](const char* name, double StageTimes::*field) {
     std::vector<double> v;
     for (const auto& t : times) v.push_back(t.*field);
     const auto [med, p90] = median_p90(v);
-    json.begin(name).number("median", med).number("p90", p90).end();
+    Json& entry = timings[name] = Json::object();
+    entry["median"] = med;
+    entry["p90"] = p90;
   };
   stage("preprocess", &StageTimes::preprocess);
   stage("e_step", &StageTimes::e_step);
@@ -658,25 +654,22 @@ void run(const RunOptions& o) {
   stage("integrate", &StageTimes::integrate);
   stage("foreground", &StageTimes::foreground);
   stage("total", &StageTimes::total);
-  json.end();
   write_object_histories(json, histories, system.object_records());
   std::vector<double> totals;
   for (const auto& t : times) totals.push_back(t.total);
   const auto [med, p90] = median_p90(totals);
-  std::printf("%zu frames on %s: %.1f ms per frame (median), %.1f ms (90th percentile); %zu objects created\n",
-              processed, B::name, med, p90, list.size());
+  fmt::print("{} frames on {}: {:.1f} ms per frame (median), {:.1f} ms (90th percentile); {} objects created\n",
+             processed, B::name, med, p90, list.size());
   if (in.truth) {
-    json.begin("evaluation");
-    print_evaluation(system.camera_trajectory(), est_objects, *in.truth, &json);
-    json.end();
+    Json& evaluation = json["evaluation"] = Json::object();
+    print_evaluation(system.camera_trajectory(), est_objects, *in.truth, &evaluation);
   }
-  json.end();
-  write_text_file((out / "run.json").string(), json.str());
+  write_json_file((out / "run.json").string(), json);
   if (interrupted)
-    std::printf("wrote %s (interrupted by %s after %zu of %zu frames)\n", o.output.c_str(), examples::signal_name(sig),
-                processed, frames);
+    fmt::print("wrote {} (interrupted by {} after {} of {} frames)\n", o.output, examples::signal_name(sig), processed,
+               frames);
   else
-    std::printf("wrote %s\n", o.output.c_str());
+    fmt::print("wrote {}\n", o.output);
 }
 
 /// `emfusion mesh`: the meshes of a checkpoint's map, without its sequence.
@@ -685,7 +678,7 @@ void mesh(const std::string& checkpoint, const std::string& output) {
   const fs::path dir = fs::path(output) / "meshes";
   create_output_directory(dir.string());
   write_meshes(dir, ck.map);
-  std::printf("wrote %s (%zu objects, %d frames)\n", dir.string().c_str(), ck.map.objects.size(), ck.map.frames);
+  fmt::print("wrote {} ({} objects, {} frames)\n", dir.string(), ck.map.objects.size(), ck.map.frames);
 }
 
 void evaluate(const std::string& sequence, const std::string& output) {
@@ -707,18 +700,18 @@ void evaluate(const std::string& sequence, const std::string& output) {
   if (fs::exists(list))
     for (const auto& e : read_object_list(list))
       est_objects[e.id] = read_tum_trajectory((fs::path(output) / "objects" / (std::to_string(e.id) + ".txt")).string());
-  JsonWriter json;
-  json.begin().string("sequence", sequence).string("output", output);
+  Json json;
+  json["sequence"] = sequence;
+  json["output"] = output;
   print_evaluation(est_cam, est_objects, gt, &json);
-  json.end();
-  write_text_file((fs::path(output) / "eval.json").string(), json.str());
+  write_json_file((fs::path(output) / "eval.json").string(), json);
   // The camera's ground truth and its estimate after the ATE alignment, from above.
   if (est_cam.size() >= 3) {
     const auto ate = eval::absolute_trajectory_error(est_cam, gt.camera);
     write_png((fs::path(output) / "trajectory.png").string(),
               trajectory_plot({trajectory_series(gt.camera, "ground truth", plot_black),
                                trajectory_series(est_cam, "estimate", label_colour(0), ate.T_gt_est)}));
-    std::printf("wrote %s\n", (fs::path(output) / "trajectory.png").string().c_str());
+    fmt::print("wrote {}\n", (fs::path(output) / "trajectory.png").string());
   }
 }
 
@@ -784,7 +777,7 @@ int main(int argc, char** argv) {
     }
     return 0;
   } catch (const std::exception& e) {
-    std::fprintf(stderr, "emfusion: error: %s\n", e.what());
+    fmt::print(stderr, "emfusion: error: {}\n", e.what());
     return 1;
   }
 }

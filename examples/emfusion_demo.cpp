@@ -16,6 +16,8 @@
 #include <string>
 #include <vector>
 
+#include <fmt/core.h>
+
 #include "emfusion/io/ply.hpp"
 #include "emfusion/sim/primitives.hpp"
 #include "emfusion/sim/render.hpp"
@@ -42,7 +44,7 @@ Options parse(int argc, char** argv) {
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     if (a == "--help" || a == "-h") {
-      std::printf("usage: emfusion_demo [--output DIR] [--frames N] [--voxels N] [--backend cpu|cuda]\n");
+      fmt::print("usage: emfusion_demo [--output DIR] [--frames N] [--voxels N] [--backend cpu|cuda]\n");
       std::exit(0);
     }
     if (i + 1 >= argc) throw std::invalid_argument("unknown option or missing value: '" + a + "'");
@@ -99,8 +101,8 @@ int run(const Options& o) {
   geometry.voxel_size = extent / S(o.voxels);
   geometry.T_world_volume = SE3<S>::translation(vec3(-extent / 2, -extent / 2, -0.2f));
   TsdfVolume<S, B> volume(geometry, backend);
-  std::printf("emfusion demo: %d frames of 640x480 into %d^3 voxels of %.1f mm on %s\n", o.frames, o.voxels,
-              1000.0 * geometry.voxel_size, B::name);
+  fmt::print("emfusion demo: {} frames of 640x480 into {}^3 voxels of {:.1f} mm on {}\n", o.frames, o.voxels,
+             1000.0 * geometry.voxel_size, B::name);
 
   Image<S, B> depth;
   std::vector<double> frame_ms;
@@ -114,7 +116,7 @@ int run(const Options& o) {
     backend.synchronize();
     frame_ms.push_back(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count());
   }
-  std::printf("  integration: median %.1f ms per frame\n", median(frame_ms));
+  fmt::print("  integration: median {:.1f} ms per frame\n", median(frame_ms));
 
   // A view half-way between two fused ones, from higher up.
   const SE3<S> check_pose =
@@ -127,18 +129,18 @@ int run(const Options& o) {
   std::vector<double> err;
   for (std::size_t i = 0; i < t.size(); ++i)
     if (t[i] > 0 && d[i] > 0) err.push_back(std::fabs(double(d[i]) - double(t[i])));
-  std::printf("  raycast of an unfused view: median depth error %.2f mm over %zu pixels\n", 1000 * median(err),
-              err.size());
+  fmt::print("  raycast of an unfused view: median depth error {:.2f} mm over {} pixels\n", 1000 * median(err),
+             err.size());
 
   const auto mesh = transformed(marching_cubes(volume), volume.pose());
   std::vector<double> vertex_err;
   for (const auto& v : mesh.vertices) vertex_err.push_back(std::fabs(double(scene.distance(v))));
-  std::printf("  mesh: %zu vertices, %zu triangles; median distance to the true surface %.2f mm\n",
-              mesh.vertices.size(), mesh.triangles.size(), 1000 * median(vertex_err));
+  fmt::print("  mesh: {} vertices, {} triangles; median distance to the true surface {:.2f} mm\n",
+             mesh.vertices.size(), mesh.triangles.size(), 1000 * median(vertex_err));
 
   const std::string path = (dir / "scene.ply").string();
   write_ply(path, mesh);
-  std::printf("  wrote %s\n", path.c_str());
+  fmt::print("  wrote {}\n", path);
   return 0;
 }
 
@@ -152,7 +154,7 @@ int main(int argc, char** argv) {
 #endif
     return run<Host>(o);
   } catch (const std::exception& e) {
-    std::fprintf(stderr, "emfusion_demo: error: %s\n", e.what());
+    fmt::print(stderr, "emfusion_demo: error: {}\n", e.what());
     return 1;
   }
 }

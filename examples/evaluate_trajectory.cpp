@@ -15,6 +15,8 @@
 #include <string>
 #include <vector>
 
+#include <fmt/core.h>
+
 #include "emfusion/eval/ate.hpp"
 #include "emfusion/eval/rpe.hpp"
 #include "emfusion/io/tum.hpp"
@@ -38,23 +40,23 @@ int main(int argc, char** argv) {
     auto est = read_tum_trajectory(positional[1]);
     for (TimedPose& p : est) p.timestamp += offset;
     const auto ate = eval::absolute_trajectory_error(est, gt);
-    std::printf("ATE RMSE %.4f m (mean %.4f, median %.4f, max %.4f) over %zu poses\n", ate.rmse, ate.mean,
-                ate.median, ate.max, ate.matched);
+    fmt::print("ATE RMSE {:.4f} m (mean {:.4f}, median {:.4f}, max {:.4f}) over {} poses\n", ate.rmse, ate.mean,
+               ate.median, ate.max, ate.matched);
     try {
       const auto rpe = eval::relative_pose_error(est, gt);
-      std::printf("RPE RMSE %.4f m/s, %.3f deg/s over %zu pairs\n", rpe.translation_rmse, rpe.rotation_rmse_deg,
-                  rpe.pairs);
+      fmt::print("RPE RMSE {:.4f} m/s, {:.3f} deg/s over {} pairs\n", rpe.translation_rmse, rpe.rotation_rmse_deg,
+                 rpe.pairs);
     } catch (const std::invalid_argument& e) {  // e.g. a trajectory shorter than the 1 s window
-      std::printf("RPE not computed: %s\n", e.what());
+      fmt::print("RPE not computed: {}\n", e.what());
     }
     if (similarity) {
       const auto sim = eval::absolute_trajectory_error(est, gt, 0.02, eval::Alignment::similarity);
-      std::printf("ATE RMSE with scale %.4f m at scale %.4f (estimate scaled by it to fit the ground truth)\n",
-                  sim.rmse, sim.scale);
+      fmt::print("ATE RMSE with scale {:.4f} m at scale {:.4f} (estimate scaled by it to fit the ground truth)\n",
+                 sim.rmse, sim.scale);
     }
     return 0;
   } catch (const std::exception& e) {
-    std::fprintf(stderr, "evaluate_trajectory: error: %s\n", e.what());
+    fmt::print(stderr, "evaluate_trajectory: error: {}\n", e.what());
     return 1;
   }
 }

@@ -10,6 +10,8 @@
 #include <stdexcept>
 #include <string>
 
+#include <fmt/core.h>
+
 #include "support/args.hpp"
 #include "support/camera_input.hpp"
 
@@ -32,10 +34,10 @@ int main(int argc, char** argv) {
     const sim::DynamicScene<float> room = sim::make_dynamic_room<float>(scene->params);
     const int frames = max_frames > 0 && max_frames < room.frame_count() ? max_frames : room.frame_count();
     examples::export_tum_sequence(room, positional[0], frames, positional[1]);
-    std::printf("wrote %d frames of %s to %s\n", frames, positional[0].c_str(), positional[1].c_str());
+    fmt::print("wrote {} frames of {} to {}\n", frames, positional[0], positional[1]);
     return 0;
   } catch (const std::exception& e) {
-    std::fprintf(stderr, "export_synthetic: error: %s\n", e.what());
+    fmt::print(stderr, "export_synthetic: error: {}\n", e.what());
     return 1;
   }
 }

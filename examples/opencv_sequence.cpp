@@ -28,6 +28,8 @@
 #include <opencv2/core.hpp>
 #include <opencv2/imgcodecs.hpp>
 
+#include <fmt/core.h>
+
 #include "emfusion/eval/ate.hpp"
 #include "emfusion/interop/opencv.hpp"
 #include "emfusion/io/masks.hpp"
@@ -102,13 +104,11 @@ void run(const Options& o) {
   }
 
   write_tum_trajectory(o.output, system.camera_trajectory());
-  std::printf("%zu frames of '%s' read with OpenCV (%d with detections), %d untracked, %zu objects live, %zu created\n",
-              frames, o.sequence.c_str(), detector_frames, untracked, system.objects().size(),
-              system.object_records().size());
+  fmt::print("{} frames of '{}' read with OpenCV ({} with detections), {} untracked, {} objects live, {} created\n",
+             frames, o.sequence, detector_frames, untracked, system.objects().size(), system.object_records().size());
   if (const auto truth = seq.ground_truth(); truth && system.camera_trajectory().size() >= 3)
-    std::printf("camera ATE RMSE %.4f m\n",
-                eval::absolute_trajectory_error(system.camera_trajectory(), *truth).rmse);
-  std::printf("wrote the camera trajectory to %s\n", o.output.c_str());
+    fmt::print("camera ATE RMSE {:.4f} m\n", eval::absolute_trajectory_error(system.camera_trajectory(), *truth).rmse);
+  fmt::print("wrote the camera trajectory to {}\n", o.output);
 }
 
 }  // namespace
@@ -139,7 +139,7 @@ int main(int argc, char** argv) {
     run(o);
     return 0;
   } catch (const std::exception& e) {
-    std::fprintf(stderr, "opencv_sequence: error: %s\n", e.what());
+    fmt::print(stderr, "opencv_sequence: error: {}\n", e.what());
     return 1;
   }
 }

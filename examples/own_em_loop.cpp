@@ -18,6 +18,8 @@
 #include <string>
 #include <vector>
 
+#include <fmt/core.h>
+
 #include "emfusion/detect/matching.hpp"
 #include "emfusion/eval/ate.hpp"
 #include "emfusion/eval/object_matching.hpp"
@@ -109,29 +111,29 @@ int run(int frames, double max_ate_cm) {
     map.record_poses(t);
     FrameResult result;
     delete_objects(map, frame, params, result, det && !first, int(fresh.size()), !first);
-    for (int id : result.deleted) std::printf("frame %zu: deleted object %d\n", i, id);
+    for (int id : result.deleted) fmt::print("frame {}: deleted object {}\n", i, id);
     ++map.frames;
   }
 
   const double camera_ate = eval::absolute_trajectory_error(map.camera_trajectory, *w.camera_truth).rmse;
-  std::printf("%zu frames on %s: camera ATE %.2f cm\n", w.depth.size(), B::name, 100 * camera_ate);
+  fmt::print("{} frames on {}: camera ATE {:.2f} cm\n", w.depth.size(), B::name, 100 * camera_ate);
   bool within = 100 * camera_ate < max_ate_cm;
   std::map<int, Trajectory> estimates;
   for (const ObjectRecord& r : map.records) estimates[r.id] = r.trajectory;
   int tracked = 0;
   for (const auto& o : eval::evaluate_objects(map.camera_trajectory, *w.camera_truth, estimates, w.object_truth)) {
     if (!o.evaluated) {
-      std::printf("object %-12s not tracked (%s)\n", o.name.c_str(), o.problem.c_str());
+      fmt::print("object {:<12} not tracked ({})\n", o.name, o.problem);
       continue;
     }
     ++tracked;
-    std::printf("object %-12s ATE %.2f cm, coverage %.0f %%\n", o.name.c_str(), 100 * o.result.ate.rmse,
-                100 * o.result.coverage);
+    fmt::print("object {:<12} ATE {:.2f} cm, coverage {:.0f} %\n", o.name, 100 * o.result.ate.rmse,
+               100 * o.result.coverage);
     within = within && 100 * o.result.ate.rmse < max_ate_cm;
   }
   if (max_ate_cm < INFINITY && (!within || tracked == 0)) {
-    std::fprintf(stderr, "own_em_loop: the camera or an object is not within %.2f cm (or no object was tracked)\n",
-                 max_ate_cm);
+    fmt::print(stderr, "own_em_loop: the camera or an object is not within {:.2f} cm (or no object was tracked)\n",
+               max_ate_cm);
     return 1;
   }
   return 0;
@@ -161,7 +163,7 @@ int main(int argc, char** argv) {
     examples::with_backend(backend, [&](auto b) { rc = run<decltype(b)>(frames, max_ate_cm); });
     return rc;
   } catch (const std::exception& e) {
-    std::fprintf(stderr, "own_em_loop: error: %s\n", e.what());
+    fmt::print(stderr, "own_em_loop: error: {}\n", e.what());
     return 1;
   }
 }

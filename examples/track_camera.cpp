@@ -29,6 +29,8 @@
 #include <string>
 #include <vector>
 
+#include <fmt/core.h>
+
 #include "emfusion/core/half.hpp"
 #include "emfusion/io/tum.hpp"
 #include "emfusion/preprocess/bilateral_filter.hpp"
@@ -134,13 +136,13 @@ void track(const Options& o) {
     integrate_ms += ms_since(t0);
     trajectory.push_back({seq.timestamp(i), T_world_camera.template cast<double>()});
     if (i > 0 && (o.verbose || !report.converged()))
-      std::fprintf(stderr, "frame %d: %s after %d iterations (%d accepted), cost %.4g -> %.4g over %.0f pixels\n", i,
-                   to_string(report.reason), report.iterations, report.accepted_steps, report.initial_cost,
-                   report.final_cost, report.terms);
+      fmt::print(stderr, "frame {}: {} after {} iterations ({} accepted), cost {:.4g} -> {:.4g} over {:.0f} pixels\n", i,
+                 to_string(report.reason), report.iterations, report.accepted_steps, report.initial_cost,
+                 report.final_cost, report.terms);
   }
   write_tum_trajectory(o.output, trajectory);
-  std::printf("%d frames on %s: preprocess + tracking %.1f ms, integration %.1f ms per frame (mean)\n", frames,
-              B::name, track_ms / frames, integrate_ms / frames);
+  fmt::print("{} frames on {}: preprocess + tracking {:.1f} ms, integration {:.1f} ms per frame (mean)\n", frames,
+             B::name, track_ms / frames, integrate_ms / frames);
 }
 
 Options parse(int argc, char** argv) {
@@ -208,7 +210,7 @@ int main(int argc, char** argv) {
     }
     return 0;
   } catch (const std::exception& e) {
-    std::fprintf(stderr, "track_camera: error: %s\n", e.what());
+    fmt::print(stderr, "track_camera: error: {}\n", e.what());
     return 1;
   }
 }

@@ -65,6 +65,7 @@ need "a C++20 compiler (g++)" build-essential have_command g++
 need "CMake 3.24 or newer" cmake have_cmake
 need "Eigen 3.4 headers" libeigen3-dev have_header Eigen/Core
 need "fmt headers" libfmt-dev have_header fmt/core.h
+need "nlohmann-json headers" nlohmann-json3-dev have_header nlohmann/json.hpp
 need "CLI11 headers" libcli11-dev have_header CLI/CLI.hpp
 need "zlib headers" zlib1g-dev have_header zlib.h
 need "libpng headers" libpng-dev have_header png.h

@@ -28,6 +28,8 @@
 #include <utility>
 #include <vector>
 
+#include <fmt/core.h>
+
 #include "emfusion/core/image.hpp"
 #include "emfusion/core/timed_pose.hpp"
 #include "emfusion/io/png.hpp"
@@ -134,21 +136,17 @@ inline void export_tum_sequence(const sim::DynamicScene<float>& scene, const std
       const double v = std::isfinite(metres[i]) && metres[i] > 0 ? std::round(double(metres[i]) * 5000) : 0;
       units[i] = v >= 1 && v <= 65535 ? std::uint16_t(v) : std::uint16_t(0);
     }
-    char file[32];
-    std::snprintf(file, sizeof(file), "depth/%06d.png", f);
+    const std::string file = fmt::format("depth/{:06}.png", f);
     write_png((fs::path(dir) / file).string(), Image<std::uint16_t, Host>::from_host(cam.width, cam.height, units));
-    char line[64];
-    std::snprintf(line, sizeof(line), "%.6f %s\n", scene.timestamp(f), file);
-    list += line;
+    list += fmt::format("{:.6f} {}\n", scene.timestamp(f), file);
   }
   write_text_file((fs::path(dir) / "depth.txt").string(), list);
   Trajectory truth = scene.camera_trajectory();
   truth.resize(std::size_t(frames));
   write_tum_trajectory((fs::path(dir) / "groundtruth.txt").string(), truth);
-  char calibration[160];
-  std::snprintf(calibration, sizeof(calibration), "%.9g %.9g %.9g %.9g %d %d\n", double(cam.fx), double(cam.fy),
-                double(cam.cx), double(cam.cy), cam.width, cam.height);
-  write_text_file((fs::path(dir) / "calibration.txt").string(), calibration);
+  write_text_file((fs::path(dir) / "calibration.txt").string(),
+                  fmt::format("{:.9g} {:.9g} {:.9g} {:.9g} {} {}\n", double(cam.fx), double(cam.fy), double(cam.cx),
+                              double(cam.cy), cam.width, cam.height));
   write_text_file((fs::path(dir) / "README.txt").string(),
                   "Made by export_synthetic from the built-in scene " + name + " (" + std::to_string(frames) +
                       " frames): rendered noisy depth, no colour; groundtruth.txt is the scene's exact camera "

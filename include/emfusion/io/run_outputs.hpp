@@ -1,6 +1,7 @@
 // Writing and reading the outputs of a run (shared FORMATS.md section 5):
 //   <out>/camera.txt, <out>/objects.txt, <out>/objects/<id>.txt,
-//   <out>/meshes/background.ply, <out>/meshes/object_<id>.ply, <out>/run.json.
+//   <out>/meshes/background.ply, <out>/meshes/object_<id>.ply, <out>/run.json
+//   (JSON through nlohmann-json: Json, json_text, write_json_file).
 // Every file is written atomically (a failed run never leaves a half-written
 // file under a final name); errors name the path. Trajectories that grow
 // while a run goes are streamed instead (io/trajectory_stream.hpp).
@@ -13,6 +14,8 @@
 #include <string>
 #include <system_error>
 #include <vector>
+
+#include <nlohmann/json.hpp>
 
 #include "emfusion/io/detail/files.hpp"
 #include "emfusion/io/tum.hpp"
@@ -88,77 +91,24 @@ inline std::vector<ObjectListEntry> read_object_list(const std::string& path) {
   return out;
 }
 
-/// A small JSON writer for run.json and eval results: enough for numbers,
-/// strings, booleans, nested objects and arrays, escaping strings.
-class JsonWriter {
- public:
-  JsonWriter& begin(const std::string& key = "") {
-    separator();
-    if (!key.empty()) text_ += quote(key) + ": ";
-    text_ += "{";
-    first_ = true;
-    ++depth_;
-    return *this;
-  }
-  JsonWriter& end() {
-    --depth_;
-    text_ += "\n" + std::string(std::size_t(2 * depth_), ' ') + "}";
-    first_ = false;
-    return *this;
-  }
-  /// An array: its elements are begin() objects or keyless values
-  /// (number, integer, string with an empty key).
-  JsonWriter& begin_array(const std::string& key) {
-    separator();
-    text_ += quote(key) + ": [";
-    first_ = true;
-    ++depth_;
-    return *this;
-  }
-  JsonWriter& end_array() {
-    --depth_;
-    text_ += "\n" + std::string(std::size_t(2 * depth_), ' ') + "]";
-    first_ = false;
-    return *this;
-  }
-  JsonWriter& number(const std::string& key, double value) {
-    return raw(key, std::isfinite(value) ? detail::tum::format(value) : "null");
-  }
-  JsonWriter& integer(const std::string& key, long long value) { return raw(key, std::to_string(value)); }
-  JsonWriter& boolean(const std::string& key, bool value) { return raw(key, value ? "true" : "false"); }
-  JsonWriter& string(const std::string& key, const std::string& value) { return raw(key, quote(value)); }
-  std::string str() const { return text_ + "\n"; }
+/// run.json, eval.json and the benchmarks' JSON documents (docs/io.md,
+/// "run.json"), through nlohmann-json: an ordered_json keeps its keys in the
+/// order they were set, so files read in the order the program wrote them.
+using Json = nlohmann::ordered_json;
 
- private:
-  JsonWriter& raw(const std::string& key, const std::string& value) {
-    separator();
-    text_ += (key.empty() ? std::string() : quote(key) + ": ") + value;
-    return *this;
-  }
-  void separator() {
-    if (depth_ == 0) return;
-    text_ += first_ ? "\n" : ",\n";
-    text_ += std::string(std::size_t(2 * depth_), ' ');
-    first_ = false;
-  }
-  static std::string quote(const std::string& s) {
-    std::string out = "\"";
-    for (const char c : s) {
-      if (c == '"' || c == '\\') out += '\\', out += c;
-      else if (c == '\n') out += "\\n";
-      else if (c == '\t') out += "\\t";
-      else if (static_cast<unsigned char>(c) < 0x20) {
-        char buf[8];
-        std::snprintf(buf, sizeof(buf), "\\u%04x", c);
-        out += buf;
-      } else out += c;
-    }
-    return out + "\"";
-  }
-  std::string text_;
-  int depth_ = 0;
-  bool first_ = true;
-};
+/// The text of a JSON document as emfusion writes it: two-space
+/// indentation, one member per line, a final newline. Numbers that are not
+/// finite (NaN, infinities) are written as null; bytes of a string that are
+/// not UTF-8 (a path on a filesystem of another encoding) become U+FFFD
+/// instead of failing the run when its summary is written.
+inline std::string json_text(const Json& document) {
+  return document.dump(2, ' ', false, Json::error_handler_t::replace) + "\n";
+}
+
+/// Writes `document` (json_text) to `path` atomically.
+inline void write_json_file(const std::string& path, const Json& document) {
+  detail::tum::write_text(path, json_text(document), "write_json_file");
+}
 
 /// Writes `text` to `path` atomically.
 inline void write_text_file(const std::string& path, const std::string& text) {

@@ -1,8 +1,9 @@
 // Downstream smoke test of the installed emfusion package: SE3 exp/log round
 // trip, a host reduction over an image, an EXR round trip through
 // emfusion::io (whose OpenEXR, when the library was built with it, the
-// package config must find again; without it, the error that says so), and
-// a few frames of the full system with a likelihood and a robust norm
+// package config must find again; without it, the error that says so), a
+// JSON document through emfusion::io (nlohmann-json, which the package config
+// must find too: NaN written as null), and a few frames of the full system with a likelihood and a robust norm
 // defined here, as a user's own. Where the package has emfusion::opencv and
 // OpenCV is here (CONSUMER_WITH_OPENCV), the system's frames go through
 // cv::Mat as a camera driver's would (16-bit depth, a label Mat) and a Mat
@@ -22,6 +23,7 @@
 #include <emfusion/core/parallel.hpp>
 #include <emfusion/core/se3.hpp>
 #include <emfusion/io/exr.hpp>
+#include <emfusion/io/run_outputs.hpp>
 #include <emfusion/sim/primitives.hpp>
 #include <emfusion/sim/render.hpp>
 #include <emfusion/slam/system.hpp>
@@ -156,6 +158,18 @@ int main() {
     }
   }
 
+  // JSON through emfusion::io (nlohmann-json): keys in order, NaN as null.
+  {
+    emfusion::Json json;
+    json["status"] = "finished";
+    json["rpe_rmse_m_per_s"] = std::nan("");
+    const std::string text = emfusion::json_text(json);
+    if (text != "{\n  \"status\": \"finished\",\n  \"rpe_rmse_m_per_s\": null\n}\n") {
+      std::fprintf(stderr, "consumer: unexpected JSON text: %s", text.c_str());
+      ++failures;
+    }
+  }
+
 #if CONSUMER_WITH_OPENCV
   // A Mat header over the image shares its pixels, and views back to them.
   auto shared = emfusion::Image<float, emfusion::Host>::from_host(width, height, pixels);
@@ -169,7 +183,7 @@ int main() {
   failures += run_system();
 
   if (failures == 0)
-    std::printf("consumer: ok (SE3 round trip error %g, image sum %g, EXR, 5 system frames with a user's likelihood and norm%s)\n",
+    std::printf("consumer: ok (SE3 round trip error %g, image sum %g, EXR, JSON, 5 system frames with a user's likelihood and norm%s)\n",
                 max_err, sum, CONSUMER_WITH_OPENCV ? ", frames through cv::Mat" : "");
   return failures == 0 ? 0 : 1;
 }
