@@ -7,7 +7,9 @@
 #include <string>
 #include <vector>
 
+#include "emfusion/core/se3.hpp"
 #include "emfusion/eval/report_html.hpp"
+#include "emfusion/eval/rpe.hpp"
 #include "emfusion/eval/svg_plot.hpp"
 #include "support/catch.hpp"
 
@@ -257,4 +259,26 @@ TEST_CASE("report_html says why a part is missing", "[eval][report]") {
   for (const char* id : {"summary", "trajectory", "error", "rpe", "objects", "timing", "memory", "pictures"})
     CHECK(contains(html, "<section id=\"" + std::string(id) + "\">"));
   CHECK(count(html, "<svg") == 0);
+}
+
+TEST_CASE("relative_pose_errors lists the windows relative_pose_error sums", "[eval][report]") {
+  // A camera whose estimate drifts 5 cm per second along x.
+  emfusion::Trajectory gt, est;
+  for (int i = 0; i < 90; ++i) {
+    const double t = i / 30.0;
+    const auto pose = emfusion::SE3<double>::from_quaternion(0, 0, 0, 1, emfusion::vec3(0.3 * t, 0.1, 1.5));
+    gt.push_back({t, pose});
+    est.push_back({t, emfusion::SE3<double>::from_quaternion(0, 0, 0, 1, emfusion::vec3(0.35 * t, 0.1, 1.5))});
+  }
+  const std::vector<RpePair> pairs = relative_pose_errors(est, gt);
+  const RpeResult rpe = relative_pose_error(est, gt);
+  REQUIRE(pairs.size() == rpe.pairs);
+  REQUIRE(pairs.size() == 60);  // the windows that end within the 3 s
+  for (std::size_t k = 0; k < pairs.size(); ++k) {
+    CHECK(pairs[k].start == Approx(k / 30.0));
+    CHECK(pairs[k].end - pairs[k].start == Approx(1.0));
+    CHECK(pairs[k].translation == Approx(0.05));
+    CHECK(pairs[k].rotation_deg == Approx(0.0).margin(1e-9));
+  }
+  CHECK(rpe.translation_rmse == Approx(0.05));
 }
