@@ -208,7 +208,8 @@ inline std::string report_html(const ReportData& d) {
   if (!d.camera_problem.empty()) h += problem(d.camera_problem);
   if (!d.ground_truth.empty() || !d.estimate.empty()) {
     const std::array<int, 3> axes = detail::report::floor_axes(d.ground_truth.empty() ? d.estimate : d.ground_truth);
-    h += "<p class=\"note\">The estimate after the rigid ATE alignment onto the ground truth. Top view: the " +
+    h += "<p class=\"note\">The estimate after the rigid ATE alignment onto the ground truth (wide gray line "
+         "underneath). Top view: the " +
          std::string(detail::report::axis_name(axes[0])) + "-" + detail::report::axis_name(axes[1]) +
          " plane (the ground truth varies least along " + detail::report::axis_name(axes[2]) +
          ", taken as the vertical).</p>\n<div class=\"plots\">\n";
@@ -218,7 +219,7 @@ inline std::string report_html(const ReportData& d) {
       p.x_label = std::string(detail::report::axis_name(a)) + " (m)";
       p.y_label = std::string(detail::report::axis_name(b)) + " (m)";
       p.series.push_back({"ground truth", detail::report::coordinate(d.ground_truth, a),
-                          detail::report::coordinate(d.ground_truth, b), "#222222", true, false, true});
+                          detail::report::coordinate(d.ground_truth, b), "#9a9a9a", true, false, false, 5});
       p.series.push_back({"estimate (aligned)", detail::report::coordinate(d.estimate, a),
                           detail::report::coordinate(d.estimate, b), plot_colour(0)});
       return svg_plot(p);

@@ -58,9 +58,9 @@ inline const char* plot_colour(std::size_t k) {
 struct SvgSeries {
   SvgSeries() = default;
   SvgSeries(std::string name_, std::vector<double> x_, std::vector<double> y_, std::string colour_ = {},
-            bool line_ = true, bool markers_ = false, bool dashed_ = false)
+            bool line_ = true, bool markers_ = false, bool dashed_ = false, double width_ = 1.8)
       : name(std::move(name_)), x(std::move(x_)), y(std::move(y_)), colour(std::move(colour_)), line(line_),
-        markers(markers_), dashed(dashed_) {}
+        markers(markers_), dashed(dashed_), width(width_) {}
 
   std::string name;
   std::vector<double> x, y;
@@ -68,6 +68,7 @@ struct SvgSeries {
   bool line = true;
   bool markers = false;
   bool dashed = false;
+  double width = 1.8;  ///< line width, pixels
 };
 
 struct SvgPlot {
@@ -169,7 +170,7 @@ inline std::string svg_plot(const SvgPlot& plot) {
   struct Entry {
     std::string name, colour;
     bool line, markers, dashed;
-    double x, y;
+    double width, x, y;
   };
   std::vector<Entry> legend;
   const double left = 72, right = 16;
@@ -181,7 +182,8 @@ inline std::string svg_plot(const SvgPlot& plot) {
     if (s.name.empty()) continue;
     const double w = 30 + detail::svg::text_width(s.name, small) + 18;
     if (lx + w > width - right && lx > left) lx = left, ly += row;
-    legend.push_back({s.name, s.colour.empty() ? plot_colour(k) : s.colour, s.line, s.markers, s.dashed, lx, ly});
+    legend.push_back(
+        {s.name, s.colour.empty() ? plot_colour(k) : s.colour, s.line, s.markers, s.dashed, s.width, lx, ly});
     lx += w;
     any_legend = true;
   }
@@ -267,7 +269,7 @@ inline std::string svg_plot(const SvgPlot& plot) {
       const auto flush = [&] {
         if (points.find(' ') != std::string::npos)  // two points at least
           o += "<polyline class=\"series\" points=\"" + points + "\" stroke=\"" + colour +
-               "\" stroke-width=\"1.8\"" + (s.dashed ? " stroke-dasharray=\"6 4\"" : "") + "/>\n";
+               "\" stroke-width=\"" + num(s.width) + "\"" + (s.dashed ? " stroke-dasharray=\"6 4\"" : "") + "/>\n";
         else if (!points.empty() && !s.markers)  // a lone point: a dot, or it would not show
           o += "<circle cx=\"" + num(last_x) + "\" cy=\"" + num(last_y) + "\" r=\"2\" fill=\"" + colour + "\"/>\n";
         points.clear();
@@ -302,7 +304,7 @@ inline std::string svg_plot(const SvgPlot& plot) {
     const double cy = e.y + row / 2;
     if (e.line)
       o += "<line x1=\"" + num(e.x) + "\" y1=\"" + num(cy) + "\" x2=\"" + num(e.x + 24) + "\" y2=\"" + num(cy) +
-           "\" stroke=\"" + colour + "\" stroke-width=\"2.5\"" + (e.dashed ? " stroke-dasharray=\"6 4\"" : "") +
+           "\" stroke=\"" + colour + "\" stroke-width=\"" + num(std::max(2.5, e.width)) + "\"" + (e.dashed ? " stroke-dasharray=\"6 4\"" : "") +
            "/>";
     if (e.markers || !e.line)
       o += "<circle cx=\"" + num(e.x + 12) + "\" cy=\"" + num(cy) + "\" r=\"3.5\" fill=\"" + colour + "\"/>";
