@@ -33,8 +33,11 @@ namespace emfusion {
 
 /// One stage time of StageTimes: its frames.csv column (without "_ms").
 struct FrameLogStage {
+  // Through an alias: nvcc's generated code words a plain member-pointer
+  // member with parentheses that g++ warns about (-Wparentheses).
+  using Field = double StageTimes::*;
   const char* name;
-  double StageTimes::*field;
+  Field field;
 };
 
 /// The stage columns in file order, after total_ms.
