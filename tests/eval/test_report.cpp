@@ -236,7 +236,8 @@ TEST_CASE("report_html embeds pictures, or says how to get them", "[eval][report
   CHECK(contains(without, "--pictures"));
   CHECK(!contains(without, "data:image/png;base64,"));
 
-  d.frames.push_back({"frame 12", {{"segmentation", std::string("\x89PNG\r\n\x1a\n", 8)}, {"association: background", "xyz"}}});
+  d.frames.push_back(
+      {"frame 12", {{"segmentation", std::string("\x89PNG\r\n\x1a\n", 8)}, {"association: background", "xyz"}}});
   d.frames.push_back({"frame 40", {{"segmentation", "abc"}}});
   const std::string with = report_html(d);
   CHECK(count(with, "src=\"data:image/png;base64,") == 3);

@@ -59,9 +59,9 @@ struct ReportObject {
   std::string class_name;  ///< the estimate's class, "" when unknown
   bool evaluated = false;
   double ate_m = std::nan("");
-  double coverage = std::nan("");                                    ///< 0..1
-  double first_time = std::nan(""), last_time = std::nan("");        ///< seconds since the first frame
-  std::string problem;                                                ///< why not evaluated
+  double coverage = std::nan("");                              ///< 0..1
+  double first_time = std::nan(""), last_time = std::nan("");  ///< seconds since the first frame
+  std::string problem;                                         ///< why not evaluated
 };
 
 /// Per-frame figures of frames.csv.
@@ -168,7 +168,8 @@ inline std::pair<double, double> median_p90(std::vector<double> v) {
   return {at(0.5), at(0.9)};
 }
 
-constexpr const char* style = R"(body{font-family:sans-serif;margin:24px auto;max-width:1180px;color:#222;background:#fafafa}
+constexpr const char* style =
+    R"(body{font-family:sans-serif;margin:24px auto;max-width:1180px;color:#222;background:#fafafa}
 h1{font-size:24px;margin-bottom:4px}h2{font-size:19px;margin-top:28px;border-bottom:1px solid #ccc;padding-bottom:4px}
 section{background:#fff;padding:8px 16px 16px;margin-bottom:12px;border:1px solid #e2e2e2}
 table{border-collapse:collapse;font-size:14px}td,th{border:1px solid #ccc;padding:4px 10px;text-align:right}
@@ -321,7 +322,8 @@ inline std::string report_html(const ReportData& d) {
     p.title = "Memory in use", p.width = 1120, p.height = 300, p.y_from_zero = true;
     p.x_label = "time since the first frame (s)", p.y_label = "memory (MiB)";
     p.series.push_back({"resident memory of the process (RSS)", t.time, t.rss_mib, plot_colour(0)});
-    const bool device = std::any_of(t.device_mib.begin(), t.device_mib.end(), [](double v) { return std::isfinite(v); });
+    const bool device =
+        std::any_of(t.device_mib.begin(), t.device_mib.end(), [](double v) { return std::isfinite(v); });
     if (device) p.series.push_back({"device memory in use (GPU)", t.time, t.device_mib, plot_colour(1)});
     h += svg_plot(p);
     if (!device) h += "<p class=\"note\">No device memory: the run used the CPU backend.</p>\n";

@@ -35,12 +35,23 @@ inline std::string xml_escape(std::string_view text) {
   out.reserve(text.size());
   for (const char c : text) {
     switch (c) {
-      case '&': out += "&amp;"; break;
-      case '<': out += "&lt;"; break;
-      case '>': out += "&gt;"; break;
-      case '"': out += "&quot;"; break;
-      case '\'': out += "&#39;"; break;
-      default: out += c;
+      case '&':
+        out += "&amp;";
+        break;
+      case '<':
+        out += "&lt;";
+        break;
+      case '>':
+        out += "&gt;";
+        break;
+      case '"':
+        out += "&quot;";
+        break;
+      case '\'':
+        out += "&#39;";
+        break;
+      default:
+        out += c;
     }
   }
   return out;
@@ -59,8 +70,14 @@ struct SvgSeries {
   SvgSeries() = default;
   SvgSeries(std::string name_, std::vector<double> x_, std::vector<double> y_, std::string colour_ = {},
             bool line_ = true, bool markers_ = false, bool dashed_ = false, double width_ = 1.8)
-      : name(std::move(name_)), x(std::move(x_)), y(std::move(y_)), colour(std::move(colour_)), line(line_),
-        markers(markers_), dashed(dashed_), width(width_) {}
+      : name(std::move(name_)),
+        x(std::move(x_)),
+        y(std::move(y_)),
+        colour(std::move(colour_)),
+        line(line_),
+        markers(markers_),
+        dashed(dashed_),
+        width(width_) {}
 
   std::string name;
   std::vector<double> x, y;
@@ -219,9 +236,8 @@ inline std::string svg_plot(const SvgPlot& plot) {
   const auto py = [&](double y) { return top + ph - (y - ay0) / (ay1 - ay0) * ph; };
 
   std::string o;
-  o += "<svg width=\"" + num(width) + "\" height=\"" + num(height) +
-       "\" viewBox=\"0 0 " + num(width) + " " + num(height) +
-       "\" font-family=\"sans-serif\" role=\"img\" class=\"plot\">\n";
+  o += "<svg width=\"" + num(width) + "\" height=\"" + num(height) + "\" viewBox=\"0 0 " + num(width) + " " +
+       num(height) + "\" font-family=\"sans-serif\" role=\"img\" class=\"plot\">\n";
   if (!plot.title.empty()) o += "<title>" + xml_escape(plot.title) + "</title>\n";
   o += "<rect x=\"0\" y=\"0\" width=\"" + num(width) + "\" height=\"" + num(height) + "\" fill=\"#ffffff\"/>\n";
   if (!plot.title.empty())
@@ -268,8 +284,8 @@ inline std::string svg_plot(const SvgPlot& plot) {
       double last_x = 0, last_y = 0;
       const auto flush = [&] {
         if (points.find(' ') != std::string::npos)  // two points at least
-          o += "<polyline class=\"series\" points=\"" + points + "\" stroke=\"" + colour +
-               "\" stroke-width=\"" + num(s.width) + "\"" + (s.dashed ? " stroke-dasharray=\"6 4\"" : "") + "/>\n";
+          o += "<polyline class=\"series\" points=\"" + points + "\" stroke=\"" + colour + "\" stroke-width=\"" +
+               num(s.width) + "\"" + (s.dashed ? " stroke-dasharray=\"6 4\"" : "") + "/>\n";
         else if (!points.empty() && !s.markers)  // a lone point: a dot, or it would not show
           o += "<circle cx=\"" + num(last_x) + "\" cy=\"" + num(last_y) + "\" r=\"2\" fill=\"" + colour + "\"/>\n";
         points.clear();
@@ -304,8 +320,8 @@ inline std::string svg_plot(const SvgPlot& plot) {
     const double cy = e.y + row / 2;
     if (e.line)
       o += "<line x1=\"" + num(e.x) + "\" y1=\"" + num(cy) + "\" x2=\"" + num(e.x + 24) + "\" y2=\"" + num(cy) +
-           "\" stroke=\"" + colour + "\" stroke-width=\"" + num(std::max(2.5, e.width)) + "\"" + (e.dashed ? " stroke-dasharray=\"6 4\"" : "") +
-           "/>";
+           "\" stroke=\"" + colour + "\" stroke-width=\"" + num(std::max(2.5, e.width)) + "\"" +
+           (e.dashed ? " stroke-dasharray=\"6 4\"" : "") + "/>";
     if (e.markers || !e.line)
       o += "<circle cx=\"" + num(e.x + 12) + "\" cy=\"" + num(cy) + "\" r=\"3.5\" fill=\"" + colour + "\"/>";
     o += "<text class=\"legend-entry\" x=\"" + num(e.x + 30) + "\" y=\"" + num(cy + 4) + "\">" + xml_escape(e.name) +

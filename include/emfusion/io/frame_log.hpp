@@ -41,19 +41,22 @@ struct FrameLogStage {
 };
 
 /// The stage columns in file order, after total_ms.
-inline constexpr FrameLogStage frame_log_stages[] = {
-    {"preprocess", &StageTimes::preprocess}, {"e_step", &StageTimes::e_step},
-    {"track_background", &StageTimes::track_background}, {"track_objects", &StageTimes::track_objects},
-    {"raycast", &StageTimes::raycast}, {"detections", &StageTimes::detections},
-    {"integrate", &StageTimes::integrate}, {"foreground", &StageTimes::foreground}};
+inline constexpr FrameLogStage frame_log_stages[] = {{"preprocess", &StageTimes::preprocess},
+                                                     {"e_step", &StageTimes::e_step},
+                                                     {"track_background", &StageTimes::track_background},
+                                                     {"track_objects", &StageTimes::track_objects},
+                                                     {"raycast", &StageTimes::raycast},
+                                                     {"detections", &StageTimes::detections},
+                                                     {"integrate", &StageTimes::integrate},
+                                                     {"foreground", &StageTimes::foreground}};
 
 /// One line of frames.csv.
 struct FrameLogRow {
-  std::size_t frame = 0;  ///< index of the frame in the input
-  double timestamp = 0;   ///< seconds
-  StageTimes times;       ///< milliseconds
-  int objects = 0;        ///< objects alive after the frame
-  double rss_mib = 0;     ///< resident memory of the process, MiB
+  std::size_t frame = 0;             ///< index of the frame in the input
+  double timestamp = 0;              ///< seconds
+  StageTimes times;                  ///< milliseconds
+  int objects = 0;                   ///< objects alive after the frame
+  double rss_mib = 0;                ///< resident memory of the process, MiB
   std::optional<double> device_mib;  ///< device memory in use, MiB (CUDA only)
 };
 
@@ -205,8 +208,7 @@ inline std::vector<FrameLogRow> read_frame_log(const std::string& path) {
       }
       char* stop = nullptr;
       const double v = std::strtod(c[k].c_str(), &stop);
-      if (stop != c[k].c_str() + c[k].size())
-        bad("value " + std::to_string(k + 1) + " '" + c[k] + "' is not a number");
+      if (stop != c[k].c_str() + c[k].size()) bad("value " + std::to_string(k + 1) + " '" + c[k] + "' is not a number");
       return v;
     };
     FrameLogRow row;

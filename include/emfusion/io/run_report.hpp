@@ -97,7 +97,8 @@ inline std::map<std::size_t, std::vector<std::string>> picture_frames(const std:
 
 /// The report's data for the run in `output` of `sequence`.
 inline eval::ReportData run_report_data(const std::string& sequence, const std::string& output,
-                                        const Trajectory& gt_camera, const std::map<std::string, Trajectory>& gt_objects,
+                                        const Trajectory& gt_camera,
+                                        const std::map<std::string, Trajectory>& gt_objects,
                                         const Trajectory& est_camera, const std::map<int, Trajectory>& est_objects,
                                         std::vector<std::string>& warnings) {
   namespace fs = std::filesystem;
@@ -113,8 +114,8 @@ inline eval::ReportData run_report_data(const std::string& sequence, const std::
   const std::string frames_path = (out / "frames.csv").string();
   std::error_code ec;
   if (!fs::exists(frames_path, ec)) {
-    d.timings_problem = "'" + frames_path +
-                        "' is missing: the run was made by an emfusion that did not write it, or it was removed";
+    d.timings_problem =
+        "'" + frames_path + "' is missing: the run was made by an emfusion that did not write it, or it was removed";
   } else {
     try {
       rows = read_frame_log(frames_path);
@@ -126,9 +127,12 @@ inline eval::ReportData run_report_data(const std::string& sequence, const std::
   }
   // Time 0: the first frame of the run.
   double t0 = 0;
-  if (!est_camera.empty()) t0 = est_camera.front().timestamp;
-  else if (!rows.empty()) t0 = rows.front().timestamp;
-  else if (!gt_camera.empty()) t0 = gt_camera.front().timestamp;
+  if (!est_camera.empty())
+    t0 = est_camera.front().timestamp;
+  else if (!rows.empty())
+    t0 = rows.front().timestamp;
+  else if (!gt_camera.empty())
+    t0 = gt_camera.front().timestamp;
 
   // Camera: ATE alignment, per-pose errors, RPE windows.
   if (est_camera.size() < 3) {
@@ -149,9 +153,8 @@ inline eval::ReportData run_report_data(const std::string& sequence, const std::
         d.error_time.push_back(est_camera[matches[k].est].timestamp - t0);
         d.error_m.push_back(norm(p - gt[k]));
       }
-      d.summary.push_back({"camera ATE RMSE", fixed(100 * ate.rmse, 2, " cm") + " over " +
-                                                  std::to_string(ate.matched) + " poses (max " +
-                                                  fixed(100 * ate.max, 2, " cm") + ")"});
+      d.summary.push_back({"camera ATE RMSE", fixed(100 * ate.rmse, 2, " cm") + " over " + std::to_string(ate.matched) +
+                                                  " poses (max " + fixed(100 * ate.max, 2, " cm") + ")"});
     } catch (const std::exception& e) {
       d.camera_problem = std::string("no camera evaluation: ") + e.what();
       warnings.push_back(d.camera_problem);
@@ -210,10 +213,13 @@ inline eval::ReportData run_report_data(const std::string& sequence, const std::
         }
         r.evaluated = o.evaluated;
         if (o.primary >= 0) fill(r, o.primary);
-        if (o.evaluated) r.ate_m = o.result.ate.rmse, r.coverage = o.result.coverage;
-        else r.coverage = 0, r.problem = o.problem;
-        if (o.estimates.size() > 1) r.problem += (r.problem.empty() ? "" : "; ") + std::string("evaluated: ") +
-                                                 std::to_string(o.primary) + " (the most frames)";
+        if (o.evaluated)
+          r.ate_m = o.result.ate.rmse, r.coverage = o.result.coverage;
+        else
+          r.coverage = 0, r.problem = o.problem;
+        if (o.estimates.size() > 1)
+          r.problem += (r.problem.empty() ? "" : "; ") + std::string("evaluated: ") + std::to_string(o.primary) +
+                       " (the most frames)";
         d.objects.push_back(r);
       }
     } catch (const std::exception& e) {
@@ -260,10 +266,10 @@ inline eval::ReportData run_report_data(const std::string& sequence, const std::
     d.summary.insert(d.summary.begin(),
                      {"frames", std::to_string(rows.size()) + " (frames.csv), " + fixed(median, 1, " ms") +
                                     " per frame median, " + fixed(p90, 1, " ms") + " 90th percentile"});
-    d.summary.push_back({"memory", "resident " + fixed(peak, 0, " MiB") + " at most" +
-                                       (std::isfinite(device_peak) ? ", device " + fixed(device_peak, 0, " MiB") +
-                                                                         " at most"
-                                                                   : std::string())});
+    d.summary.push_back(
+        {"memory",
+         "resident " + fixed(peak, 0, " MiB") + " at most" +
+             (std::isfinite(device_peak) ? ", device " + fixed(device_peak, 0, " MiB") + " at most" : std::string())});
   }
 
   // Pictures of up to report_picture_frames frames, evenly spread.
@@ -292,8 +298,7 @@ inline eval::ReportData run_report_data(const std::string& sequence, const std::
       if (files.size() > report_pictures_per_frame) files.resize(report_pictures_per_frame);
       for (const auto& [caption, file] : files) {
         try {
-          f.pictures.push_back(
-              {caption, emfusion::detail::io::read_file((pictures / file).string(), "run report")});
+          f.pictures.push_back({caption, emfusion::detail::io::read_file((pictures / file).string(), "run report")});
         } catch (const std::exception& e) {
           warnings.push_back(e.what());
         }
@@ -306,10 +311,9 @@ inline eval::ReportData run_report_data(const std::string& sequence, const std::
 
 /// Writes <output>/report.html (atomically: a temporary file renamed into
 /// place) and returns its path.
-inline std::string write_run_report(const std::string& sequence, const std::string& output,
-                                    const Trajectory& gt_camera, const std::map<std::string, Trajectory>& gt_objects,
-                                    const Trajectory& est_camera, const std::map<int, Trajectory>& est_objects,
-                                    std::vector<std::string>& warnings) {
+inline std::string write_run_report(const std::string& sequence, const std::string& output, const Trajectory& gt_camera,
+                                    const std::map<std::string, Trajectory>& gt_objects, const Trajectory& est_camera,
+                                    const std::map<int, Trajectory>& est_objects, std::vector<std::string>& warnings) {
   const std::string path = (std::filesystem::path(output) / "report.html").string();
   write_text_file(path, eval::report_html(run_report_data(sequence, output, gt_camera, gt_objects, est_camera,
                                                           est_objects, warnings)));
