@@ -59,6 +59,7 @@
 #include "emfusion/io/checkpoint.hpp"
 #include "emfusion/io/cofusion.hpp"
 #include "emfusion/io/config.hpp"
+#include "emfusion/io/frame_log.hpp"
 #include "emfusion/io/intrinsics.hpp"
 #include "emfusion/io/klg.hpp"
 #include "emfusion/io/masks.hpp"
@@ -66,6 +67,7 @@
 #include "emfusion/io/ply.hpp"
 #include "emfusion/io/run_json.hpp"
 #include "emfusion/io/run_outputs.hpp"
+#include "emfusion/io/run_report.hpp"
 #include "emfusion/io/trajectory_stream.hpp"
 #include "emfusion/io/tum.hpp"
 #include "emfusion/sim/detector.hpp"
@@ -486,6 +488,22 @@ class StreamedOutputs {
   std::chrono::steady_clock::time_point last_sync_;
 };
 
+/// frames.csv's lines of the frames before `first` from the run resumed
+/// (<resume>/frames.csv), so that a resumed run's file covers every frame;
+/// none when not resuming or when that file is missing or unreadable.
+std::vector<FrameLogRow> resumed_frame_log(const std::string& resume, std::size_t first) {
+  std::vector<FrameLogRow> kept;
+  const fs::path path = fs::path(resume) / "frames.csv";
+  if (resume.empty() || first == 0 || !fs::exists(path)) return kept;
+  try {
+    for (const FrameLogRow& row : read_frame_log(path.string()))
+      if (row.frame < first) kept.push_back(row);
+  } catch (const std::runtime_error& e) {
+    fmt::print(stderr, "emfusion: warning: {}: frames.csv starts at the checkpoint\n", e.what());
+  }
+  return kept;
+}
+
 /// meshes/background.ply and meshes/object_<id>.ply of every live object.
 template <class B>
 void write_meshes(const fs::path& dir, const Map<S, B>& map) {
@@ -554,6 +572,7 @@ void run(const RunOptions& o) {
     write_json_file((out / "run.json").string(), json);
   }
   StreamedOutputs streams(o.output);
+  FrameLog frame_log((out / "frames.csv").string(), resumed_frame_log(o.resume, first));
   // The trajectories so far, from the checkpoint: the files come out as
   // those of a run that never stopped.
   if (first > 0) streams.update(system.camera_trajectory(), system.object_records());
@@ -575,6 +594,7 @@ void run(const RunOptions& o) {
     histories.add(r, system.map());
     processed = i + 1;
     streams.update(system.camera_trajectory(), system.object_records());
+    frame_log.append({i, t, r.times, r.live_objects, resident_memory_mib(), device_memory_mib<B>()});
     if (o.checkpoint_every > 0 && processed % std::size_t(o.checkpoint_every) == 0 && processed < frames)
       save_checkpoint(checkpoint, system);
     times.push_back(r.times);
@@ -619,6 +639,7 @@ void run(const RunOptions& o) {
 
   // Outputs (FORMATS.md section 5): the trajectories are complete already.
   streams.close();
+  frame_log.close();
   if (o.checkpoint_every > 0) save_checkpoint(checkpoint, system);
   const std::vector<ObjectListEntry> list = object_list(system.object_records());
   write_object_list((out / "objects.txt").string(), list);
@@ -705,14 +726,11 @@ void evaluate(const std::string& sequence, const std::string& output) {
   json["output"] = output;
   print_evaluation(est_cam, est_objects, gt, &json);
   write_json_file((fs::path(output) / "eval.json").string(), json);
-  // The camera's ground truth and its estimate after the ATE alignment, from above.
-  if (est_cam.size() >= 3) {
-    const auto ate = eval::absolute_trajectory_error(est_cam, gt.camera);
-    write_png((fs::path(output) / "trajectory.png").string(),
-              trajectory_plot({trajectory_series(gt.camera, "ground truth", plot_black),
-                               trajectory_series(est_cam, "estimate", label_colour(0), ate.T_gt_est)}));
-    fmt::print("wrote {}\n", (fs::path(output) / "trajectory.png").string());
-  }
+  // report.html: what cannot be read is said in the page and here, and the rest is written.
+  std::vector<std::string> warnings;
+  const std::string report = write_run_report(sequence, output, gt.camera, gt.objects, est_cam, est_objects, warnings);
+  for (const std::string& w : warnings) fmt::print(stderr, "emfusion: warning: {}\n", w);
+  fmt::print("wrote {}\n", report);
 }
 
 }  // namespace

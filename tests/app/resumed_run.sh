@@ -37,6 +37,9 @@ rm -rf "$work" && mkdir -p "$work" || fail "cannot make $work"
 grep -q "resuming from .* at frame 6" "$work/second.log" || fail "no resume message: $(cat "$work/second.log")"
 same_outputs "$work/straight" "$work/resumed"
 grep -q '"frames": 12' "$work/resumed/run.json" || fail "run.json of the resumed run does not count 12 frames"
+# frames.csv: the frames before the checkpoint kept, then the resumed ones.
+[ "$(cut -d, -f1 "$work/resumed/frames.csv" | tail -n +2 | tr '\n' ' ')" = "$(seq -s ' ' 0 $((frames - 1))) " ] ||
+  fail "frames.csv of the resumed run does not list frames 0..$((frames - 1)) once each"
 
 # Meshes from the checkpoint alone equal the run's.
 "$app" mesh "$work/resumed/checkpoint.emfckpt" --output "$work/meshed" > "$work/mesh.log" 2>&1 ||

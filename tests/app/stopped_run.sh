@@ -105,6 +105,7 @@ case $case in
     [ "$(json_value last_frame "$work/out/run.json")" = $((n - 1)) ] || fail "run.json's last_frame is not $((n - 1))"
     check_tum "$work/out/camera.txt"
     [ "$(poses "$work/out/camera.txt")" = "$n" ] || fail "camera.txt has $(poses "$work/out/camera.txt") poses, not $n"
+    [ "$(($(wc -l <"$work/out/frames.csv") - 1))" = "$n" ] || fail "frames.csv has not $n frame lines"
     [ -s "$work/out/objects.txt" ] || fail "objects.txt is missing"
     ids=$(awk '!/^#/ && NF { print $1 }' "$work/out/objects.txt")
     [ -n "$ids" ] || fail "objects.txt lists no object (room-small creates some on its first frames)"

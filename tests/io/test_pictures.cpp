@@ -1,7 +1,7 @@
 // Colour pictures: RGB PNG round trips and conversions, JPEG decoding
 // (files written here with libjpeg's compressor), read_colour's choice by
 // content, clear errors for bad input to each reader; the segmentation
-// overlay, the association heat map, the 5x7 font and the trajectory plot.
+// overlay and the association heat map.
 #include <algorithm>
 #include <cmath>
 #include <csetjmp>
@@ -19,7 +19,6 @@
 #include <jpeglib.h>
 #include <png.h>
 
-#include "emfusion/eval/ate.hpp"
 #include "emfusion/io/colour.hpp"
 #include "emfusion/io/jpeg.hpp"
 #include "emfusion/io/pictures.hpp"
@@ -188,16 +187,6 @@ std::vector<std::pair<int, int>> pixels_of(const ColourImage& image, Rgb8 colour
     for (int x = 0; x < v.width; ++x)
       if (v(x, y) == colour) out.emplace_back(x, y);
   return out;
-}
-
-/// True if a pixel of `colour` lies within `radius` of (x, y).
-bool colour_near(const ColourImage& image, double x, double y, Rgb8 colour, int radius = 1) {
-  const auto v = image.view();
-  const int cx = int(std::lround(x)), cy = int(std::lround(y));
-  for (int dy = -radius; dy <= radius; ++dy)
-    for (int dx = -radius; dx <= radius; ++dx)
-      if (v.contains(cx + dx, cy + dy) && v(cx + dx, cy + dy) == colour) return true;
-  return false;
 }
 
 }  // namespace
@@ -537,174 +526,3 @@ TEST_CASE("association_heatmap: 0 and 1 at the colour map's ends, luma rising, i
 }
 
 // ---- text and trajectory plots ------------------------------------------------------
-
-TEST_CASE("draw_text draws the 5x7 glyphs, clipped to the image", "[io][pictures]") {
-  ColourImage image(20, 10, plot_white);
-  draw_text(image.view(), 1, 1, "T", plot_black);
-  // T: a full top row, then the middle column.
-  for (int x = 1; x <= 5; ++x) CHECK(image.view()(x, 1) == plot_black);
-  for (int y = 2; y <= 7; ++y) CHECK(image.view()(3, y) == plot_black);
-  CHECK(image.view()(1, 2) == plot_white);
-  CHECK(pixels_of(image, plot_black).size() == 11);
-  ColourImage lower(20, 10, plot_white);
-  draw_text(lower.view(), 1, 1, "t", plot_black);
-  CHECK(lower.to_host() == image.to_host());
-  CHECK(text_width("abc", 2) == 36);
-  // Far outside, and partly outside: no crash, nothing written out of bounds.
-  draw_text(image.view(), -100, -100, "HELLO 0.5 M", plot_black, 3);
-  draw_text(image.view(), 15, 5, "WIDE TEXT: 123/456_-", plot_black, 2);
-}
-
-TEST_CASE("trajectory_plot draws each series where the frame projects it, at equal scale", "[io][pictures]") {
-  const Rgb8 red{220, 20, 20}, blue{20, 40, 220};
-  // In the x-z plane (y constant): an L and a diagonal.
-  const PlotSeries a{"ground truth", {{0, 0, 0}, {2, 0, 0}, {2, 0, 1}}, red};
-  const PlotSeries b{"estimate", {{0, 0, 1}, {1, 0, 0.5}}, blue};
-  PlotOptions options;
-  options.width = 600, options.height = 500;
-  const PlotFrame frame = trajectory_plot_frame({a, b}, options);
-  CHECK(frame.axis_right == 0);  // x right, z up: y has no spread
-  CHECK(frame.axis_up == 2);
-  const ColourImage plot = trajectory_plot({a, b}, options);
-  REQUIRE(plot.width() == 600);
-  REQUIRE(plot.height() == 500);
-
-  for (const Vec3d& p : a.points) {
-    INFO("a at " << frame.pixel_x(p) << ", " << frame.pixel_y(p));
-    CHECK(colour_near(plot, frame.pixel_x(p), frame.pixel_y(p), red));
-    CHECK(frame.pixel_x(p) > frame.left);
-    CHECK(frame.pixel_x(p) < frame.right);
-    CHECK(frame.pixel_y(p) > frame.top);
-    CHECK(frame.pixel_y(p) < frame.bottom);
-  }
-  for (const Vec3d& p : b.points) CHECK(colour_near(plot, frame.pixel_x(p), frame.pixel_y(p), blue));
-  // The middle of a's first segment, along x.
-  CHECK(colour_near(plot, frame.pixel_x({1, 0, 0}), frame.pixel_y({1, 0, 0}), red));
-  // Orientation: +x to the right, +z up; and one scale for both axes.
-  CHECK(frame.pixel_x({2, 0, 0}) - frame.pixel_x({0, 0, 0}) == emfusion::test::Approx(2 * frame.scale));
-  CHECK(frame.pixel_y({0, 0, 0}) - frame.pixel_y({0, 0, 1}) == emfusion::test::Approx(frame.scale));
-  // Width 2 m fills the (wider) area's width less the inner margin.
-  CHECK(2 * frame.scale > 0.8 * (frame.right - frame.left));
-  // Grid step: a round number giving a handful of lines.
-  CHECK(frame.grid_step == emfusion::test::Approx(0.5).margin(1e-12));
-  // The legend lists both names in black below the plot area.
-  bool text_below = false;
-  for (const auto& [x, y] : pixels_of(plot, plot_black)) text_below = text_below || y > frame.bottom;
-  CHECK(text_below);
-  // Every blue pixel of the segment lies on it: continuous line, no stray dots.
-  const auto blue_pixels = pixels_of(plot, blue);
-  std::set<int> columns;
-  for (const auto& [x, y] : blue_pixels)
-    if (y < frame.bottom) columns.insert(x);
-  const int x0 = int(std::lround(frame.pixel_x(b.points[0]))), x1 = int(std::lround(frame.pixel_x(b.points[1])));
-  for (int x = x0; x <= x1; ++x) CHECK(columns.count(x) == 1);
-}
-
-TEST_CASE("trajectory_plot keeps squares square and chooses the floor plane", "[io][pictures]") {
-  const Rgb8 green{0, 160, 60};
-  // A 3 m square in x-y at height z = 1.5 (a z-up world), in a wide image.
-  const PlotSeries square{"", {{0, 0, 1.5}, {3, 0, 1.5}, {3, 3, 1.5}, {0, 3, 1.5}, {0, 0, 1.5}}, green};
-  PlotOptions options;
-  options.width = 900, options.height = 400;
-  const PlotFrame frame = trajectory_plot_frame({square}, options);
-  CHECK(frame.axis_right == 0);
-  CHECK(frame.axis_up == 1);
-  const ColourImage plot = trajectory_plot({square}, options);
-  int lo_x = 1 << 30, hi_x = -1, lo_y = 1 << 30, hi_y = -1;
-  for (const auto& [x, y] : pixels_of(plot, green))
-    lo_x = std::min(lo_x, x), hi_x = std::max(hi_x, x), lo_y = std::min(lo_y, y), hi_y = std::max(hi_y, y);
-  REQUIRE(hi_x > lo_x);
-  const int side_x = hi_x - lo_x, side_y = hi_y - lo_y;
-  INFO("square drawn " << side_x << " x " << side_y);
-  CHECK(std::abs(side_x - side_y) <= 2);
-  CHECK(side_y > 200);
-
-  SECTION("explicit axes") {
-    options.axis_right = 1, options.axis_up = 2;
-    const PlotFrame yz = trajectory_plot_frame({square}, options);
-    CHECK(yz.axis_right == 1);
-    CHECK(yz.axis_up == 2);
-    options.axis_up = 1;
-    CHECK_THROWS_AS(trajectory_plot_frame({square}, options), std::invalid_argument);
-    options.axis_right = -1;
-    CHECK_THROWS_AS(trajectory_plot({square}, options), std::invalid_argument);
-  }
-}
-
-TEST_CASE("trajectory_plot survives degenerate input", "[io][pictures]") {
-  const Rgb8 red{220, 20, 20};
-  const double nan = std::numeric_limits<double>::quiet_NaN();
-  const double huge = std::numeric_limits<double>::max();
-  const std::vector<std::vector<PlotSeries>> cases = {
-      {},
-      {PlotSeries{"empty", {}, red}},
-      {PlotSeries{"one point", {{1, 2, 3}}, red}},
-      {PlotSeries{"same point", {{1, 2, 3}, {1, 2, 3}, {1, 2, 3}}, red}},
-      {PlotSeries{"not finite", {{nan, 0, 0}, {0, nan, 1}}, red}},
-      {PlotSeries{"broken", {{0, 0, 0}, {nan, 0, 0}, {1, 0, 1}}, red}},
-      {PlotSeries{"far apart", {{-huge, 0, 0}, {huge, 0, 1}}, red}},
-      {PlotSeries{"a line", {{0, 0, 0}, {0, 0, 5}}, red}},
-  };
-  for (std::size_t i = 0; i < cases.size(); ++i) {
-    INFO("case " << i);
-    for (const int size : {64, 800}) {
-      const ColourImage plot = trajectory_plot(cases[i], size, size);
-      CHECK(plot.width() == size);
-      CHECK(plot.height() == size);
-      const PlotFrame frame = trajectory_plot_frame(cases[i], PlotOptions{size, size});
-      CHECK(std::isfinite(frame.scale));
-      CHECK(frame.scale > 0);
-      CHECK(frame.grid_step > 0);
-    }
-  }
-  // A single point: its marker at the plot area's centre.
-  const std::vector<PlotSeries> one = {PlotSeries{"one point", {{1, 2, 3}}, red}};
-  const PlotFrame frame = trajectory_plot_frame(one);
-  CHECK(frame.pixel_x({1, 2, 3}) == emfusion::test::Approx(0.5 * (frame.left + frame.right)));
-  CHECK(colour_near(trajectory_plot(one), frame.pixel_x({1, 2, 3}), frame.pixel_y({1, 2, 3}), red));
-  // Many named series: the legend is cut, the image still complete.
-  std::vector<PlotSeries> many;
-  for (int k = 0; k < 200; ++k)
-    many.push_back(PlotSeries{"series " + std::to_string(k), {{double(k), 0, 0}}, label_colour(k)});
-  CHECK(trajectory_plot(many, 200, 120).width() == 200);
-  CHECK_THROWS_WITH(trajectory_plot({}, 63, 100), EMF_CONTAINS("at least 64x64"));
-}
-
-TEST_CASE("trajectory_series maps a trajectory's positions, e.g. by an ATE alignment", "[io][pictures]") {
-  Trajectory trajectory = {{0.0, SE3<double>::translation({1, 2, 3})}, {0.1, SE3<double>::translation({4, 5, 6})}};
-  const PlotSeries plain = trajectory_series(trajectory, "camera", plot_black);
-  REQUIRE(plain.points.size() == 2);
-  CHECK(plain.points[1][0] == 4);
-  const PlotSeries moved = trajectory_series(trajectory, "aligned", plot_black, SE3<double>::translation({10, 0, 0}));
-  CHECK(moved.points[0][0] == 11);
-  CHECK(moved.points[0][2] == 3);
-  CHECK(moved.name == "aligned");
-
-  // A plot written as PNG reads back unchanged.
-  ScratchDir dir;
-  const ColourImage plot = trajectory_plot({plain, moved}, 128, 128);
-  write_png(dir.file("trajectory.png"), plot);
-  CHECK(read_colour(dir.file("trajectory.png")).to_host() == plot.to_host());
-}
-
-TEST_CASE("trajectory_series with an ATE alignment draws the estimate over the ground truth", "[io][pictures]") {
-  // The estimate is the ground truth seen from another world frame.
-  Trajectory ground_truth, estimate;
-  const SE3<double> T_est_gt = SE3<double>::from_quaternion(0.1, -0.3, 0.2, 0.92, vec3(0.5, -1.0, 2.0));
-  for (int i = 0; i < 40; ++i) {
-    const double t = 0.05 * i;
-    const SE3<double> pose = SE3<double>::translation(vec3(std::cos(t), 0.1 * t, std::sin(2 * t)));
-    ground_truth.push_back({t, pose});
-    estimate.push_back({t, T_est_gt * pose});
-  }
-  const eval::AteResult ate = eval::absolute_trajectory_error(estimate, ground_truth);
-  CHECK(ate.rmse < 1e-9);
-  const PlotSeries gt = trajectory_series(ground_truth, "ground truth", plot_black);
-  const PlotSeries est = trajectory_series(estimate, "estimate", label_colour(0), ate.T_gt_est);
-  for (std::size_t i = 0; i < gt.points.size(); ++i)
-    for (int k = 0; k < 3; ++k) CHECK(est.points[i][k] == emfusion::test::Approx(gt.points[i][k]).margin(1e-9));
-  const ColourImage plot = trajectory_plot({gt, est});
-  const PlotFrame frame = trajectory_plot_frame({gt, est});
-  // The estimate, drawn last, covers the ground truth's path.
-  for (const Vec3d& p : gt.points) CHECK(colour_near(plot, frame.pixel_x(p), frame.pixel_y(p), label_colour(0)));
-}

@@ -52,8 +52,18 @@ struct RpeResult {
 /// RPE over windows of `delta_seconds`; see the top of this header for the
 /// pairs used. Throws std::invalid_argument for delta_seconds <= 0, fewer than
 /// 2 matched poses, or when no pair of matched poses is delta_seconds apart.
-inline RpeResult relative_pose_error(const Trajectory& est, const Trajectory& gt, double delta_seconds = 1.0,
-                                     double max_difference = 0.02) {
+/// One pose pair of the RPE: the window from ground-truth time `start` to
+/// `end` and the error E's translation (metres) and rotation angle (degrees).
+struct RpePair {
+  double start, end;
+  double translation;
+  double rotation_deg;
+};
+
+/// The pose pairs relative_pose_error uses, in the order of their start
+/// times (for plotting the drift over time); the same checks and errors.
+inline std::vector<RpePair> relative_pose_errors(const Trajectory& est, const Trajectory& gt,
+                                                 double delta_seconds = 1.0, double max_difference = 0.02) {
   constexpr const char* where = "relative_pose_error";
   emfusion::detail::require(std::isfinite(delta_seconds) && delta_seconds > 0.0, where,
                             "delta_seconds must be finite and > 0, got " + detail::number(delta_seconds));
@@ -73,8 +83,8 @@ inline RpeResult relative_pose_error(const Trajectory& est, const Trajectory& gt
   std::nth_element(spacing.begin(), spacing.begin() + std::ptrdiff_t(spacing.size() / 2), spacing.end());
   const double tolerance = std::max(max_difference, 0.5 * spacing[spacing.size() / 2]);
 
-  double sum_sq_translation = 0.0, sum_sq_angle = 0.0;
-  std::size_t pairs = 0;
+  const double pi = 3.14159265358979323846;
+  std::vector<RpePair> pairs;
   for (std::size_t i = 0; i < n; ++i) {
     const double target = times[i] + delta_seconds;
     std::size_t j = std::size_t(std::lower_bound(times.begin(), times.end(), target) - times.begin());
@@ -83,17 +93,27 @@ inline RpeResult relative_pose_error(const Trajectory& est, const Trajectory& gt
     const SE3<double> gt_motion = gt[matches[i].gt].pose.inverse() * gt[matches[j].gt].pose;
     const SE3<double> est_motion = est[matches[i].est].pose.inverse() * est[matches[j].est].pose;
     const SE3<double> error = est_motion * gt_motion.inverse();
-    sum_sq_translation += squared_norm(error.translation());
-    sum_sq_angle += squared_norm(so3_log(error.rotation()));
-    ++pairs;
+    pairs.push_back({times[i], times[j], norm(error.translation()), norm(so3_log(error.rotation())) * 180.0 / pi});
   }
-  emfusion::detail::require(pairs > 0, where,
+  emfusion::detail::require(!pairs.empty(), where,
                             "no pair of matched poses is delta_seconds = " + detail::number(delta_seconds) +
                                 " s apart (the " + std::to_string(n) + " matched poses span " +
                                 detail::number(times.back() - times.front()) + " s)");
+  return pairs;
+}
+
+inline RpeResult relative_pose_error(const Trajectory& est, const Trajectory& gt, double delta_seconds = 1.0,
+                                     double max_difference = 0.02) {
+  double sum_sq_translation = 0.0, sum_sq_angle = 0.0;
   const double pi = 3.14159265358979323846;
-  return RpeResult{std::sqrt(sum_sq_translation / double(pairs)), std::sqrt(sum_sq_angle / double(pairs)) * 180.0 / pi,
-                   pairs};
+  const std::vector<RpePair> pairs = relative_pose_errors(est, gt, delta_seconds, max_difference);
+  for (const RpePair& p : pairs) {
+    sum_sq_translation += p.translation * p.translation;
+    const double angle = p.rotation_deg * pi / 180.0;
+    sum_sq_angle += angle * angle;
+  }
+  return RpeResult{std::sqrt(sum_sq_translation / double(pairs.size())),
+                   std::sqrt(sum_sq_angle / double(pairs.size())) * 180.0 / pi, pairs.size()};
 }
 
 }  // namespace emfusion::eval
