@@ -3,7 +3,9 @@
 # Release, in build/) and runs the full EM-Fusion system on the built-in
 # synthetic scene `synthetic:room-small` (320x240, 150 frames, three moving
 # objects, simulated detector), printing the camera and object errors and
-# writing trajectories, meshes and run.json to out/room-small/. Extra
+# writing trajectories, meshes and run.json to out/room-small/, then (with
+# ground truth, as the built-in scenes have) evaluates the run and writes
+# out/room-small/report.html. Extra
 # arguments go to `emfusion run`, e.g.
 #   bash scripts/run.sh --max-frames 60
 #   bash scripts/run.sh --input synthetic:room --output out/room   (640x480, slower)
@@ -35,4 +37,12 @@ esac
 say "running: $app run $input --output $output --backend $backend ${args[*]:-}"
 "$app" run "$input" --output "$output" --backend "$backend" "${args[@]}"
 [[ $output == /* ]] || output="${repo_root}/${output}"
-say "done; results are in ${output}"
+# With ground truth (built-in scenes, sequences with groundtruth.txt), the
+# evaluation and the run report (report.html: plots, tables, pictures).
+if [[ $input == synthetic:* || -f $input/groundtruth.txt ]]; then
+  say "evaluating: $app eval $input $output"
+  "$app" eval "$input" "$output"
+  say "done; results are in ${output}; open ${output}/report.html in a browser"
+else
+  say "done; results are in ${output}"
+fi
