@@ -1,14 +1,12 @@
 // Memory figures for the benchmarks: peak and current resident host memory
-// of this process, and device memory in use (CUDA builds), in MiB.
+// of this process, and device memory in use (CUDA builds), in MiB. The
+// current figures are the ones frames.csv records (io/frame_log.hpp).
 #pragma once
 
 #include <sys/resource.h>
 
-#include <cstdio>
-#include <type_traits>
-#include <unistd.h>
-
 #include "emfusion/core/backend.hpp"
+#include "emfusion/io/frame_log.hpp"
 
 namespace emfusion::bench {
 
@@ -20,26 +18,13 @@ inline double peak_host_mib() {
 }
 
 /// Resident set size now (/proc/self/statm); 0 where that file is missing.
-inline double current_host_mib() {
-  std::FILE* f = std::fopen("/proc/self/statm", "r");
-  if (!f) return 0;
-  long pages = 0, resident = 0;
-  const int n = std::fscanf(f, "%ld %ld", &pages, &resident);
-  std::fclose(f);
-  return n == 2 ? double(resident) * double(sysconf(_SC_PAGESIZE)) / (1024.0 * 1024.0) : 0.0;
-}
+inline double current_host_mib() { return resident_memory_mib(); }
 
-/// Device memory in use on the current GPU (all processes); 0 on the host backend.
+/// Device memory in use on the current GPU (all processes); 0 on the host
+/// backend or when the GPU cannot say.
 template <class B>
 double device_used_mib() {
-#if EMFUSION_HAS_CUDA
-  if constexpr (std::is_same_v<B, Cuda>) {
-    std::size_t free = 0, total = 0;
-    cudaMemGetInfo(&free, &total);
-    return double(total - free) / (1024.0 * 1024.0);
-  }
-#endif
-  return 0;
+  return device_memory_mib<B>().value_or(0.0);
 }
 
 }  // namespace emfusion::bench
