@@ -2,16 +2,20 @@
 # The project's test command (README; CI runs exactly this via .ci/run):
 #   1. installs what is missing (scripts/setup-debian.sh test; no-op when all is there),
 #   2. configures, builds and tests the CPU-only build in build/ (preset
-#      release; every ctest entry but the label integration),
-#   3. builds the same (benchmarks aside) under AddressSanitizer + UBSan in
-#      build-asan/ (preset asan-ubsan) and runs the whole ctest suite there,
-#      two at a time, the long simulated runs (label integration) included,
+#      release) without the Catch2 unit tests (EMFUSION_BUILD_UNIT_TESTS=OFF:
+#      they run once, in step 3; with EMFUSION_SKIP_SANITIZERS=1 here): the
+#      examples and their runs, the benchmarks' runs, the consumer,
+#   3. builds everything but the benchmarks under AddressSanitizer + UBSan in
+#      build-asan/ (preset asan-ubsan) and runs the ctest suite there, two at
+#      a time: the unit tests, the long simulated runs (label integration),
+#      the examples' short runs; not what only the release build runs (label
+#      release_only: long example runs, the consumer),
 #   4. fuzzes every parser for EMFUSION_FUZZ_SECONDS each (scripts/fuzz.sh,
 #      clang + libFuzzer, build-fuzz/),
 #   5. when nvcc is present, configures build-cuda/ and compiles the targets
-#      that instantiate every algorithm on CUDA (the app, track_camera and two
-#      benchmarks) without running them (CI has no GPU), so that the CUDA
-#      code path keeps compiling.
+#      that instantiate every algorithm on CUDA (the app and track_camera)
+#      without running them (CI has no GPU), so that the CUDA code path keeps
+#      compiling.
 # Environment: EMFUSION_JOBS overrides the parallel build jobs (default:
 # nproc); EMFUSION_FUZZ_SECONDS the fuzzing time per target (default 20 here;
 # scripts/fuzz.sh alone defaults to 60); EMFUSION_SKIP_SANITIZERS=1 and
@@ -32,11 +36,20 @@ say() { printf '==> [test.sh %3dm%02ds] %s\n' $(((SECONDS - started) / 60)) $(((
 say "checking dependencies (scripts/setup-debian.sh test: installs only what is missing)"
 bash scripts/setup-debian.sh test
 
-say "CPU build: configuring build/ (preset release)"
-cmake --preset release
+# The unit tests are built and run once, under the sanitizers (step 3); this
+# build runs what only an optimised build can run in time. Without step 3
+# (EMFUSION_SKIP_SANITIZERS=1) it runs them itself.
+if [[ "${EMFUSION_SKIP_SANITIZERS:-0}" != 1 ]]; then
+  unit_tests=OFF
+  say "CPU build: configuring build/ (preset release, EMFUSION_BUILD_UNIT_TESTS=OFF: the unit tests run under the sanitizers)"
+else
+  unit_tests=ON
+  say "CPU build: configuring build/ (preset release, with the unit tests: the sanitizer step is skipped)"
+fi
+cmake --preset release -DEMFUSION_BUILD_UNIT_TESTS=$unit_tests
 say "CPU build: building with -j${jobs}"
 cmake --build --preset release -j "$jobs"
-say "CPU build: running ctest without the label integration (it runs under the sanitizers; OMP_WAIT_POLICY=${OMP_WAIT_POLICY})"
+say "CPU build: running ctest without the label integration (OMP_WAIT_POLICY=${OMP_WAIT_POLICY})"
 ctest --preset release
 
 if [[ "${EMFUSION_SKIP_SANITIZERS:-0}" != 1 ]]; then
@@ -72,17 +85,16 @@ if [[ -n "$nvcc_path" ]]; then
     -DCMAKE_CUDA_ARCHITECTURES=90 \
     -DCMAKE_BUILD_TYPE=Release \
     -DEMFUSION_WERROR=ON
-  # The app, the camera tracker and the two benchmarks instantiate every
-  # algorithm on the CUDA backend (System<float, Cuda> and the parts it is
-  # built from); the CUDA tests themselves are built and run on a GPU
-  # machine (docs/building.md, "CUDA"). Compiling every target here took
-  # about 11 minutes of CI's 41. One target depends on the four
-  # (emfusion_cuda_compile_check), so that they compile two at a time: named
-  # one by one, make built them one after another (5.0 min at 8e1eb67; 3.9
-  # min as one target).
-  say "CUDA build: building emfusion_cuda_compile_check (emfusion_app track_camera bench_volume bench_system) with -j${jobs}"
+  # The app and the camera tracker instantiate every algorithm on the CUDA
+  # backend (System<float, Cuda> and the parts it is built from, half
+  # volumes); the CUDA tests themselves are built and run on a GPU machine
+  # (docs/building.md, "CUDA"). One target depends on the two
+  # (emfusion_cuda_compile_check), so that they compile at once: named one by
+  # one, make built them one after another. The benchmarks are compiled where
+  # they run, on the GPU machine.
+  say "CUDA build: building emfusion_cuda_compile_check (emfusion_app track_camera) with -j${jobs}"
   cmake --build build-cuda -j "$jobs" --target emfusion_cuda_compile_check
-  say "CUDA build: compiled emfusion_app track_camera bench_volume bench_system in build-cuda/ but did NOT run them (no GPU is assumed here)."
+  say "CUDA build: compiled emfusion_app and track_camera in build-cuda/ but did NOT run them (no GPU is assumed here)."
 else
   say "CUDA build: SKIPPED (nvcc not found on PATH nor at /usr/local/cuda/bin/nvcc)."
 fi
