@@ -7,9 +7,9 @@
 #      examples and their runs, the benchmarks' runs, the consumer,
 #   3. builds everything but the benchmarks under AddressSanitizer + UBSan in
 #      build-asan/ (preset asan-ubsan) and runs the ctest suite there, two at
-#      a time: the unit tests, the long simulated runs (label integration),
-#      the examples' short runs; not what only the release build runs (label
-#      release_only: long example runs, the consumer),
+#      a time: the unit tests and the app's runs; not what only the release
+#      build runs (label release_only: the long simulated runs, the tools
+#      beside the app, the consumer),
 #   4. fuzzes every parser for EMFUSION_FUZZ_SECONDS each (scripts/fuzz.sh,
 #      clang + libFuzzer, build-fuzz/),
 #   5. when nvcc is present, configures build-cuda/ and compiles the targets
@@ -49,7 +49,7 @@ fi
 cmake --preset release -DEMFUSION_BUILD_UNIT_TESTS=$unit_tests
 say "CPU build: building with -j${jobs}"
 cmake --build --preset release -j "$jobs"
-say "CPU build: running ctest without the label integration (OMP_WAIT_POLICY=${OMP_WAIT_POLICY})"
+say "CPU build: running ctest (OMP_WAIT_POLICY=${OMP_WAIT_POLICY})"
 ctest --preset release
 
 if [[ "${EMFUSION_SKIP_SANITIZERS:-0}" != 1 ]]; then
