@@ -179,6 +179,34 @@ figure{display:inline-block;margin:4px;vertical-align:top}figure img{width:280px
 figcaption{font-size:13px;color:#444;max-width:280px}code{background:#f0f0f0;padding:1px 4px}
 )";
 
+
+/// Labels of one curve over time (series_section).
+struct SeriesLabels {
+  const char* title;
+  const char* x_label;
+  const char* y_label;
+  const char* legend;
+  int colour;
+};
+
+/// A report section with one curve of metres over time, drawn in centimetres,
+/// or the reason it is missing when there are no values.
+inline std::string series_section(const char* id, const char* heading, const std::vector<double>& time,
+                                  const std::vector<double>& metres, const std::string& missing, const char* note,
+                                  const SeriesLabels& labels) {
+  std::string h = std::string("<section id=\"") + id + "\"><h2>" + heading + "</h2>\n";
+  if (metres.empty()) {
+    h += problem(missing);
+  } else {
+    h += std::string("<p class=\"note\">") + note + "</p>\n";
+    SvgPlot p;
+    p.title = labels.title, p.width = 1120, p.height = 320, p.y_from_zero = true;
+    p.x_label = labels.x_label, p.y_label = labels.y_label;
+    p.series.push_back({labels.legend, time, scaled(metres, 100), plot_colour(labels.colour)});
+    h += svg_plot(p);
+  }
+  return h + "</section>\n";
+}
 }  // namespace detail::report
 
 /// The whole page.
@@ -239,35 +267,20 @@ inline std::string report_html(const ReportData& d) {
   }
   h += "</section>\n";
 
-  // Translation error over time.
-  h += "<section id=\"error\"><h2>Translation error over time</h2>\n";
-  if (d.error_m.empty()) {
-    h += problem(d.camera_problem.empty() ? "no matched poses" : d.camera_problem);
-  } else {
-    h += "<p class=\"note\">Distance between each estimated camera position (after the ATE alignment) and its "
-         "ground-truth position.</p>\n";
-    SvgPlot p;
-    p.title = "Camera translation error (ATE, per frame)", p.width = 1120, p.height = 320, p.y_from_zero = true;
-    p.x_label = "time since the first frame (s)", p.y_label = "error (cm)";
-    p.series.push_back({"translation error", d.error_time, detail::report::scaled(d.error_m, 100), plot_colour(0)});
-    h += svg_plot(p);
-  }
-  h += "</section>\n";
-
-  // RPE over time.
-  h += "<section id=\"rpe\"><h2>Relative pose error (1 s windows)</h2>\n";
-  if (d.rpe_m.empty()) {
-    h += problem(d.rpe_problem.empty() ? "no pose pairs 1 s apart" : d.rpe_problem);
-  } else {
-    h += "<p class=\"note\">Translation drift of the camera over each 1 s window (TUM evaluate_rpe, fixed delta), "
-         "at the start of the window.</p>\n";
-    SvgPlot p;
-    p.title = "Relative translation error over 1 s", p.width = 1120, p.height = 320, p.y_from_zero = true;
-    p.x_label = "window start, time since the first frame (s)", p.y_label = "drift per window (cm)";
-    p.series.push_back({"RPE translation", d.rpe_time, detail::report::scaled(d.rpe_m, 100), plot_colour(1)});
-    h += svg_plot(p);
-  }
-  h += "</section>\n";
+  // Translation error and RPE over time: one curve each, in centimetres.
+  h += detail::report::series_section(
+      "error", "Translation error over time", d.error_time, d.error_m,
+      d.camera_problem.empty() ? "no matched poses" : d.camera_problem,
+      "Distance between each estimated camera position (after the ATE alignment) and its ground-truth position.",
+      {"Camera translation error (ATE, per frame)", "time since the first frame (s)", "error (cm)",
+       "translation error", 0});
+  h += detail::report::series_section(
+      "rpe", "Relative pose error (1 s windows)", d.rpe_time, d.rpe_m,
+      d.rpe_problem.empty() ? "no pose pairs 1 s apart" : d.rpe_problem,
+      "Translation drift of the camera over each 1 s window (TUM evaluate_rpe, fixed delta), at the start of the "
+      "window.",
+      {"Relative translation error over 1 s", "window start, time since the first frame (s)", "drift per window (cm)",
+       "RPE translation", 1});
 
   // Objects.
   h += "<section id=\"objects\"><h2>Objects</h2>\n";
