@@ -17,7 +17,7 @@
 #      without running them (CI has no GPU), so that the CUDA code path keeps
 #      compiling.
 # Environment: EMFUSION_JOBS overrides the parallel build jobs (default:
-# nproc); EMFUSION_FUZZ_SECONDS the fuzzing time per target (default 20 here;
+# nproc); EMFUSION_FUZZ_SECONDS the fuzzing time per target (default 10 here;
 # scripts/fuzz.sh alone defaults to 60); EMFUSION_SKIP_SANITIZERS=1 and
 # EMFUSION_SKIP_FUZZ=1 skip steps 3 and 4 (for quick local runs; CI runs all).
 set -euo pipefail
@@ -64,8 +64,8 @@ else
 fi
 
 if [[ "${EMFUSION_SKIP_FUZZ:-0}" != 1 ]]; then
-  say "fuzzing: scripts/fuzz.sh, ${EMFUSION_FUZZ_SECONDS:-20} s per target"
-  EMFUSION_FUZZ_SECONDS="${EMFUSION_FUZZ_SECONDS:-20}" bash scripts/fuzz.sh
+  say "fuzzing: scripts/fuzz.sh, ${EMFUSION_FUZZ_SECONDS:-10} s per target"
+  EMFUSION_FUZZ_SECONDS="${EMFUSION_FUZZ_SECONDS:-10}" bash scripts/fuzz.sh
 else
   say "fuzzing: SKIPPED (EMFUSION_SKIP_FUZZ=1)"
 fi

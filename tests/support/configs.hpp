@@ -21,6 +21,16 @@ using AllConfigs = std::tuple<Config<float, Host>, Config<double, Host>, Config<
 using AllConfigs = std::tuple<Config<float, Host>, Config<double, Host>>;
 #endif
 
+/// The long whole-system rule tests (tests/slam/test_system_rules.cpp):
+/// float on every backend built. Their rules do not depend on the scalar,
+/// and System<double> runs in the stage and hostile-frame tests; in double
+/// too they cost over a minute of the sanitizer build's tests.
+#if EMFUSION_HAS_CUDA
+using SystemRuleConfigs = std::tuple<Config<float, Host>, Config<float, Cuda>>;
+#else
+using SystemRuleConfigs = std::tuple<Config<float, Host>>;
+#endif
+
 /// Tolerance helpers: float tests get looser bounds than double tests.
 template <class S>
 constexpr double eps_for() {
