@@ -131,6 +131,8 @@ const std::vector<ParameterEntry<S>>& parameter_table() {
       EMF_NUMBER("max_covered_fraction", max_covered_fraction, "drop masks this much covered by objects"),
       EMF_NUMBER("min_existence", min_existence, "delete objects below this existence probability"),
       EMF_INTEGER("visibility_border", visibility_border, "image border ignored for visibility (px)"),
+      EMF_NUMBER("keep_visible_fraction", keep_visible_fraction,
+                 "objects in the map stay visible down to this fraction of min_mask_pixels"),
       EMF_NUMBER("min_association", min_association, "delete objects with a lower mean association"),
       EMF_BOOL("ignore_person", ignore_person, "person objects: association only"),
       EMF_INTEGER("lost_object_frames", lost_object_frames, "keep objects that left the view this long (0: delete)"),

@@ -1,6 +1,7 @@
 // Stage 5 of the EM-Fusion frame, on frames with a detector result (paper
 // sec. 3.5): detections are matched to the rendered object masks by IoU;
-// matched objects count an existence, the others a miss; a matched
+// matched objects count an existence, the others a miss where they are
+// visible; a matched
 // detection that overflows its object's volume grows it; an unmatched one
 // first tries to bring back a lost object (reidentification.hpp) and else
 // creates an object (10th-90th percentile box, padding, 64^3 voxels, within
@@ -8,6 +9,7 @@
 // pixels of its own, never of a static class).
 #pragma once
 
+#include <algorithm>
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
@@ -37,6 +39,19 @@ struct DetectionUpdate {
   std::vector<NewObjectWeights<S, B>> fresh;
   std::vector<int> object_of_detection;
 };
+
+/// Per object (labels 1..objects of the rendered segmentation `seg`) the
+/// pixels it covers inside a `border` wide margin of the image.
+inline std::vector<int> inner_pixels_per_object(const std::vector<int>& seg, int width, int height, int objects,
+                                                int border) {
+  std::vector<int> count(std::size_t(std::max(objects, 0)), 0);
+  for (int v = border; v < height - border; ++v)
+    for (int u = border; u < width - border; ++u) {
+      const int label = seg[std::size_t(v) * std::size_t(width) + std::size_t(u)];
+      if (label >= 1 && label <= objects) ++count[std::size_t(label - 1)];
+    }
+  return count;
+}
 
 /// The detections without instances the system cannot use: a label outside
 /// 1..65535 (the label image's values) or one an earlier instance has, or a
@@ -153,10 +168,16 @@ DetectionUpdate<S, B> handle_detections(Map<S, B>& map, const Frame<S, B>& frame
     obj.add_class_score(det.instances[d].class_name, det.instances[d].score);
     grow_for_detection(obj, points, labels, det.instances[d].label, map.T_world_camera, camera, params);
   }
+  // A miss counts only for an object the detector could have seen: visible
+  // in the rendered segmentation (the lifecycle's rule, rendered pixels
+  // only), or a person kept for association only (never rendered).
+  const std::vector<int> drawn = inner_pixels_per_object(
+      seg, camera.width, camera.height, int(map.objects.size()), params.visibility_border_for(camera.width));
+  const int min_pixels = params.keep_mask_pixels_for(camera.width, camera.height);
   for (std::size_t o = 0; o < map.objects.size(); ++o) {
     if (seen[o])
       map.objects[o]->count_detected();
-    else
+    else if (drawn[o] >= min_pixels || params.ignores(map.objects[o]->class_name()))
       map.objects[o]->count_missed();
   }
   const S outside = unexplained_association<S>(likelihood);

@@ -2,9 +2,12 @@
 // 4.2 with the reference implementation's rules): an object is deleted when
 // its existence probability falls below 0.1 on a detector frame, when it is
 // no longer visible (fewer than 40x40 rendered or associated pixels inside a
-// 20-pixel border), or when its mean association over its rendered mask
-// falls below 0.1. One deleted as not visible is kept as lost for
-// re-identification (an extension of the paper; docs/system.md).
+// 20-pixel border), or, while visible, when its mean association over its
+// rendered mask falls below 0.1. One deleted as not visible or as weakly
+// associated is kept as lost for re-identification (an extension of the
+// paper; docs/system.md, "Lost objects"): the first is out of sight, the
+// second is drawn where the camera no longer sees it, as after a fast move
+// its tracking could not follow.
 #pragma once
 
 #include <algorithm>
@@ -116,7 +119,8 @@ ObjectStatus object_status(const Map<S, B>& map, const Frame<S, B>& frame, int k
 /// Stage 7 on a mapped frame: applies the deletion rules to the objects
 /// that existed before the frame (all but the last `created`, which
 /// detection handling added), reports every one in result.object_status,
-/// moves those deleted as not visible to map.lost, forgets lost objects
+/// moves those deleted as not visible or weakly associated to map.lost
+/// (existence deletes for good), forgets lost objects
 /// beyond lost_object_frames and max_lost_objects, and renews the grace of
 /// young objects on detector frames. `tracked`: tracking ran this frame, so
 /// association images exist for every object that existed before it.
@@ -124,7 +128,7 @@ template <class S, Backend B>
 void delete_objects(Map<S, B>& map, const Frame<S, B>& frame, const SystemParams<S>& params, FrameResult& result,
                     bool detector_frame, int created, bool tracked) {
   const int old_objects = int(map.objects.size()) - created;
-  const int min_pixels = params.min_mask_pixels_for(frame.segmentation.width(), frame.segmentation.height());
+  const int min_pixels = params.keep_mask_pixels_for(frame.segmentation.width(), frame.segmentation.height());
   // Grace lasts until the object is first seen or the detector runs again.
   if (detector_frame) map.young.clear();
   const auto young = [&](int id) { return std::find(map.young.begin(), map.young.end(), id) != map.young.end(); };
@@ -133,13 +137,14 @@ void delete_objects(Map<S, B>& map, const Frame<S, B>& frame, const SystemParams
   for (int k = 0; k < old_objects; ++k) {
     const ObjectModel<S, B>& o = *map.objects[std::size_t(k)];
     ObjectStatus status = object_status(map, frame, k, associated, params);
+    const bool visible = status.visible_pixels >= min_pixels;
     if (detector_frame && o.existence_probability() < params.min_existence)
       why[std::size_t(k)] = DeletionReason::existence;
-    else if (!params.ignores(o.class_name()) && status.visible_pixels < min_pixels && !young(o.id()))
+    else if (!params.ignores(o.class_name()) && !visible && !young(o.id()))
       why[std::size_t(k)] = DeletionReason::not_visible;
-    if (status.visible_pixels >= min_pixels) std::erase(map.young, o.id());
-    else if (status.mean_association < params.min_association)
+    else if (visible && status.mean_association < params.min_association)
       why[std::size_t(k)] = DeletionReason::weak_association;
+    if (visible) std::erase(map.young, o.id());
     status.deleted = why[std::size_t(k)];
     result.object_status.push_back(status);
   }
@@ -153,7 +158,7 @@ void delete_objects(Map<S, B>& map, const Frame<S, B>& frame, const SystemParams
     rec.deleted = true;
     rec.reason = why[k];
     result.deleted.push_back(map.objects[k]->id());
-    if (why[k] == DeletionReason::not_visible && params.lost_object_frames > 0 && params.max_lost_objects > 0)
+    if (why[k] != DeletionReason::existence && params.lost_object_frames > 0 && params.max_lost_objects > 0)
       map.lost.push_back(LostObject<S, B>{std::move(map.objects[k]), map.frames});
   }
   map.objects = std::move(keep);

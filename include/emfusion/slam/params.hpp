@@ -109,12 +109,17 @@ struct SystemParams {
   double max_covered_fraction = 0.5;  ///< drop a mask when existing objects cover this much of it
   double min_existence = 0.1;         ///< delete when Ex / (Ex + NonEx) falls below
   int visibility_border = 20;         ///< pixels (at 640 wide); mask pixels nearer the image edge do not count
+  /// An object already in the map stays visible down to this fraction of
+  /// min_mask_pixels (hysteresis: a new object still needs all of them);
+  /// 1 is the paper's single threshold.
+  double keep_visible_fraction = 1.0;
   double min_association = 0.1;       ///< delete when the mean association over the mask falls below
   std::vector<std::string> static_classes = default_static_classes();
   bool ignore_person = false;         ///< keep person objects for association only
 
   // Objects that leave the view (an extension of the paper, docs/system.md,
-  // "Lost objects"). An object deleted as not visible is kept as lost, with
+  // "Lost objects"). An object deleted as not visible or as weakly
+  // associated while visible is kept as lost, with
   // neither tracking nor mapping, for lost_object_frames frames (0: deleted
   // for good, the paper's rule), at most max_lost_objects of them. A
   // detection of its class that matches no live object is aligned to each
@@ -141,6 +146,11 @@ struct SystemParams {
   /// min_mask_pixels for a width x height image (it is given for 640x480).
   int min_mask_pixels_for(int width, int height) const {
     return std::max(1, int(std::lround(double(min_mask_pixels) * width * height / (640.0 * 480.0))));
+  }
+  /// The visible pixels below which an object in the map is not visible
+  /// (min_mask_pixels_for times keep_visible_fraction, at least 1).
+  int keep_mask_pixels_for(int width, int height) const {
+    return std::max(1, int(std::lround(keep_visible_fraction * min_mask_pixels_for(width, height))));
   }
   /// visibility_border for an image `width` pixels wide (it is given for 640).
   int visibility_border_for(int width) const { return int(std::lround(double(visibility_border) * width / 640.0)); }
@@ -190,6 +200,8 @@ struct SystemParams {
     detail::require(match_iou >= 0 && match_iou < 1, w, "match_iou must be in [0, 1)");
     detail::require(min_mask_pixels >= 1, w, "min_mask_pixels must be at least 1");
     detail::require(visibility_border >= 0, w, "visibility_border must not be negative");
+    detail::require(keep_visible_fraction > 0 && keep_visible_fraction <= 1, w,
+                    "keep_visible_fraction must be in (0, 1]");
     detail::require(lost_object_frames >= 0 && max_lost_objects >= 0, w,
                     "lost_object_frames and max_lost_objects must not be negative");
     detail::require(reidentify_min_inliers > 0 && reidentify_min_inliers <= 1, w,
