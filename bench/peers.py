@@ -21,7 +21,8 @@ their rows are its first poses (re-stamped and evaluated against their own groun
 so in the table, with tab900's time per frame; --no-prefix runs them on their own. The script
 checks that the depth files agree before it reads a run this way.
 The real ones are made under <out>/seq/ by bench/there_and_back.py (links into ../shared/data, no
-copy); when ../shared/data/redkitchen_300 is absent they are skipped with a message. --quick runs
+copy; EMFUSION_SHARED_DIR=DIR reads DIR/data instead of ../shared/data); when redkitchen_300 is
+absent they are skipped with a message. --quick runs
 the first 60 frames of redkitchen_300 and synthetic-long.
 
 Methods. track_camera runs once per --tc NAME=ARGS (default: one configuration, 'track_camera',
@@ -84,7 +85,9 @@ import time
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 REPO = os.path.dirname(HERE)
-SHARED_DATA = os.path.normpath(os.path.join(REPO, '..', 'shared', 'data'))
+# EMFUSION_SHARED_DIR: a copy of the shared folder elsewhere (as bench/generalisation.py).
+SHARED_DATA = os.path.join(os.environ.get('EMFUSION_SHARED_DIR') or os.path.normpath(os.path.join(REPO, '..', 'shared')),
+                           'data')
 KITCHEN = os.path.join(SHARED_DATA, 'redkitchen_300')
 
 # name: (kind, arguments). Real ones: there_and_back.py --frames --step (None: the base itself).

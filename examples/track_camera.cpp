@@ -12,7 +12,8 @@
 //                [--integration paper|refined] [--behind-band F] [--silhouette-guard VOXELS]
 //                [--bilateral-radius R] [--central-gradient] [--depth-weight Z] [--store float|half]
 //                [--huber VOXELS] [--truncation VOXELS] [--integrate-filtered]
-//                [--pyramid LEVELS] [--predict] [--retry] [--verbose]
+//                [--pyramid LEVELS] [--predict] [--retry] [--photometric WEIGHT]
+//                [--photometric-huber H] [--verbose]
 //
 // --store half keeps the volume's SDF and weight in 16 bits (core/half.hpp).
 // --huber and --truncation change the paper's 2 and 10 voxels;
@@ -21,8 +22,12 @@
 // --predict starts at the constant-velocity prediction when the frame agrees
 // with it at least as well as with the last pose, --retry solves again from
 // the other start when a solve fails or moves beyond the system's per-frame
-// bound (slam/tracking.hpp, track_in_volume). docs/tracking.md has what each
-// changed.
+// bound (slam/tracking.hpp, track_in_volume). --photometric adds WEIGHT
+// times a photometric term on the colour images (solve/photometric.hpp:
+// the previous frame's points and intensity against the current frame's,
+// Huber of H intensity units, default 0.05) to the SDF term: the sequence
+// needs colour; it replaces the starts and retries of --predict/--retry by
+// one solve from the last pose. docs/tracking.md has what each changed.
 #include <chrono>
 #include <cstdio>
 #include <stdexcept>
@@ -34,9 +39,11 @@
 #include "emfusion/core/half.hpp"
 #include "emfusion/io/tum.hpp"
 #include "emfusion/preprocess/bilateral_filter.hpp"
+#include "emfusion/preprocess/intensity.hpp"
 #include "emfusion/preprocess/vertex_map.hpp"
 #include "emfusion/slam/motion_prediction.hpp"
 #include "emfusion/slam/tracking.hpp"
+#include "emfusion/solve/photometric.hpp"
 #include "emfusion/solve/sdf_alignment.hpp"
 #include "emfusion/volume/integrate.hpp"
 #include "support/args.hpp"
@@ -63,6 +70,7 @@ struct Options {
   std::string store = "float";
   bool integrate_filtered = false;
   double huber_voxels = 2, truncation_voxels = 10;
+  double photometric = 0, photometric_huber = 0.05;  // --photometric: weight of the colour term; 0 = off
 };
 
 template <class B, class Store>
@@ -71,6 +79,8 @@ void track(const Options& o) {
   const examples::CameraInput seq(o.sequence);
   if (!o.ground_truth.empty()) write_tum_trajectory(o.ground_truth, seq.ground_truth());
   const PinholeCamera<S> camera = seq.camera().cast<S>();
+  if (o.photometric > 0 && !seq.has_colour())
+    throw std::runtime_error("--photometric needs colour images, and '" + o.sequence + "' has none");
   const int frames = o.max_frames > 0 && o.max_frames < int(seq.size()) ? o.max_frames : int(seq.size());
 
   // The paper's background: camera at the centre of one face of the cube.
@@ -96,6 +106,11 @@ void track(const Options& o) {
   if (o.bilateral_radius >= 0) bilateral.radius = o.bilateral_radius;
   Image<S, B> filtered;
   Image<Vec3<S>, B> points;
+  // --photometric: this frame's intensity and gradient, the previous frame's points and intensity.
+  Image<S, B> intensity, previous_intensity;
+  Image<Vec2<S>, B> gradient;
+  Image<Vec3<S>, B> previous_points;
+  const HuberNorm<S> photometric_huber{S(o.photometric_huber)};
   SE3<S> T_world_camera;
   Trajectory trajectory;
   LinearizationCache<S, B> cache;
@@ -112,8 +127,18 @@ void track(const Options& o) {
     auto t0 = clock::now();
     bilateral_filter(depth, filtered, bilateral);
     back_project(filtered, camera, points);
+    if (o.photometric > 0) {
+      intensity_image(seq.colour(std::size_t(i)), intensity, backend);
+      intensity_gradient(intensity, gradient);
+    }
     PoseTrack t;
-    if (i > 0) {
+    if (i > 0 && o.photometric > 0) {
+      const PhotometricTerms<S> photometric = make_photometric(previous_points, previous_intensity, T_world_camera,
+                                                               intensity, gradient, camera);
+      T_world_camera = align_to_volume_and_intensity(volume, points, static_cast<const Image<S, B>*>(nullptr),
+                                                     T_world_camera, huber, align, photometric, photometric_huber,
+                                                     S(o.photometric), LevenbergMarquardt{lm}, &t.report);
+    } else if (i > 0) {
       PoseStarts<S> starts{T_volume_world * T_world_camera, std::nullopt};
       if (o.predict && i > 1)
         starts.predicted =
@@ -135,6 +160,7 @@ void track(const Options& o) {
     integrate(volume, o.integrate_filtered ? filtered : depth, camera, T_world_camera, static_cast<const Image<S, B>*>(nullptr), fusion);
     integrate_ms += ms_since(t0);
     trajectory.push_back({seq.timestamp(i), T_world_camera.template cast<double>()});
+    if (o.photometric > 0) std::swap(previous_points, points), std::swap(previous_intensity, intensity);
     if (i > 0 && (o.verbose || !report.converged()))
       fmt::print(stderr, "frame {}: {} after {} iterations ({} accepted), cost {:.4g} -> {:.4g} over {:.0f} pixels\n", i,
                  to_string(report.reason), report.iterations, report.accepted_steps, report.initial_cost,
@@ -170,6 +196,8 @@ Options parse(int argc, char** argv) {
     else if (a == "--huber") o.huber_voxels = examples::parse_positive_double(a, v);
     else if (a == "--truncation") o.truncation_voxels = examples::parse_positive_double(a, v);
     else if (a == "--depth-weight") o.depth_weight = examples::parse_positive_double(a, v);
+    else if (a == "--photometric") o.photometric = examples::parse_positive_double(a, v);
+    else if (a == "--photometric-huber") o.photometric_huber = examples::parse_positive_double(a, v);
     else if (a == "--store") {
       if (v != "float" && v != "half") throw std::invalid_argument("--store must be float or half");
       o.store = v;
@@ -187,6 +215,7 @@ Options parse(int argc, char** argv) {
                                 "[--integration paper|refined] [--behind-band F] [--silhouette-guard G] "
                                 "[--bilateral-radius R] [--depth-weight Z] [--central-gradient] [--store float|half] "
                                 "[--huber VOXELS] [--truncation VOXELS] [--integrate-filtered] "
+                                "[--photometric WEIGHT] [--photometric-huber H] "
                                 "[--pyramid LEVELS] [--predict] [--retry] [--verbose]");
   o.sequence = positional[0], o.output = positional[1];
   return o;

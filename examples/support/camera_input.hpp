@@ -32,6 +32,7 @@
 
 #include "emfusion/core/image.hpp"
 #include "emfusion/core/timed_pose.hpp"
+#include "emfusion/io/jpeg.hpp"
 #include "emfusion/io/png.hpp"
 #include "emfusion/io/run_outputs.hpp"
 #include "emfusion/io/tum.hpp"
@@ -93,6 +94,15 @@ class CameraInput {
   double timestamp(std::size_t i) const { return tum_ ? tum_->timestamp(i) : synthetic_->timestamp(i); }
   Image<float, Host> depth(std::size_t i) const { return tum_ ? tum_->depth(i) : synthetic_->depth(i); }
   PinholeCamera<double> camera() const { return tum_ ? tum_->camera() : synthetic_->camera(); }
+  /// True when every frame has a colour image (a recorded sequence with
+  /// rgb.txt or associations.txt; the simulated scenes have none).
+  bool has_colour() const { return tum_ && tum_->has_colour(); }
+  /// Frame i's colour image (PNG or JPEG); an error naming the input when it
+  /// has no colour.
+  ColourImage colour(std::size_t i) const {
+    if (!has_colour()) throw std::runtime_error("'" + name_ + "' has no colour images");
+    return read_colour(tum_->colour_path(i));
+  }
   /// The simulated scene; nullptr for a recorded sequence.
   const sim::DynamicScene<float>* scene() const { return synthetic_ ? &synthetic_->scene() : nullptr; }
 

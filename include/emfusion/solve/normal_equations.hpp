@@ -75,6 +75,16 @@ struct NormalEquations6 {
   EMF_HD Vec6<double> gradient() const { return Vec6<double>{{g[0], g[1], g[2], g[3], g[4], g[5]}}; }
 };
 
+/// `n` with H, g and every cost multiplied by `weight` (the term counts
+/// stay): the normal equations of `weight` times a problem's cost, to add to
+/// another problem's when a pose is solved for the sum of two costs.
+inline NormalEquations6 scaled(NormalEquations6 n, double weight) {
+  for (double& h : n.H) h *= weight;
+  for (double& v : n.g) v *= weight;
+  n.cost *= weight, n.shared_cost *= weight, n.shared_reference_cost *= weight;
+  return n;
+}
+
 /// A least-squares problem over a pose, one term per index: `term` gives the
 /// residual, its Jacobian with respect to a left perturbation exp(xi) * T and
 /// a fixed weight (>= 0), or false if the term does not take part at T.
