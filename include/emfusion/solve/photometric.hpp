@@ -171,24 +171,18 @@ SE3<S> align_to_volume_and_intensity(const TsdfVolume<S, B, Store>& volume, cons
   photometric.T_frame_reference = T_volume_world * photometric.T_frame_reference;
   const SdfAlignmentTerms<S, Store> sdf = sdf_alignment_in_box(volume, points, association, params, backend);
   const int photometric_stride = photometric.stride;
-  SE3<S> T = T_volume_world * T_world_camera;
-  int iterations = 0, accepted = 0;
-  SolveReport level_report;
-  for (int level = params.pyramid_levels - 1; level >= 0; --level) {
-    const SdfAlignmentTerms<S, Store> sdf_level = at_level(sdf, params, level);
-    photometric.stride = photometric_stride << level;
-    const auto lin = [&](const SE3<S>& pose, const SE3<S>* reference) {
-      NormalEquations6 n = linearize(backend, sdf_level, norm, pose, reference);
-      if (weight > S(0)) n += scaled(linearize(backend, photometric, photometric_norm, pose, reference), weight);
-      return n;
-    };
-    level_report = SolveReport{};
-    const SE3<S> solved = solver.solve(lin, T, &level_report);
-    iterations += level_report.iterations, accepted += level_report.accepted_steps;
-    if (level == 0 || level_report.converged()) T = solved;
-  }
-  level_report.iterations = iterations, level_report.accepted_steps = accepted;
-  if (report) *report = level_report;
+  const SE3<S> T = coarse_to_fine(
+      params.pyramid_levels, T_volume_world * T_world_camera, report,
+      [&](int level, const SE3<S>& from, SolveReport& r) {
+        const SdfAlignmentTerms<S, Store> sdf_level = at_level(sdf, params, level);
+        photometric.stride = photometric_stride << level;
+        const auto lin = [&](const SE3<S>& pose, const SE3<S>* reference) {
+          NormalEquations6 n = linearize(backend, sdf_level, norm, pose, reference);
+          if (weight > S(0)) n += scaled(linearize(backend, photometric, photometric_norm, pose, reference), weight);
+          return n;
+        };
+        return solver.solve(lin, from, &r);
+      });
   return volume.pose() * T;
 }
 

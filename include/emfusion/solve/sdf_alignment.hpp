@@ -201,35 +201,44 @@ SdfAlignmentTerms<S, Store> at_level(SdfAlignmentTerms<S, Store> terms, const Sd
   return terms;
 }
 
-/// Minimises the robust cost of `terms` with `solver` from `start`, coarse to
-/// fine over params.pyramid_levels levels, each level starting where the
-/// coarser one stopped. The report is the finest level's, with the
-/// iterations and accepted steps of all levels added up. `values` is reset
-/// for every level (the terms change with it).
-template <class S, Backend B, class Store, class Norm, class Solver>
-  requires RobustNorm<Norm, S> && PoseSolver<Solver, S>
-SE3<S> solve_coarse_to_fine(const B& backend, const SdfAlignmentTerms<S, Store>& terms, const Norm& norm,
-                            const SdfAlignmentParams<S>& params, const Solver& solver, const SE3<S>& start,
-                            SolveReport* report, LinearizationCache<S, B>& values) {
+/// The coarse-to-fine loop over `levels` levels: `solve_level(level, start,
+/// report)` solves one level from `start` and returns its pose; the finest
+/// (level 0) runs last, each level from where the coarser one stopped. A
+/// coarse level without a solution (too few terms at its spacing) hands on
+/// its start: the finer level decides. The report is the finest level's,
+/// with the iterations and accepted steps of all levels added up.
+template <class S, class SolveLevel>
+SE3<S> coarse_to_fine(int levels, const SE3<S>& start, SolveReport* report, SolveLevel&& solve_level) {
   SE3<S> T = start;
   int iterations = 0, accepted = 0;
   SolveReport level_report;
-  for (int level = params.pyramid_levels - 1; level >= 0; --level) {
-    const SdfAlignmentTerms<S, Store> level_terms = at_level(terms, params, level);
-    values.reset();
-    const auto lin = [&](const SE3<S>& pose, const SE3<S>* reference) {
-      return linearize(backend, level_terms, norm, pose, reference, values);
-    };
+  for (int level = levels - 1; level >= 0; --level) {
     level_report = SolveReport{};
-    const SE3<S> solved = solver.solve(lin, T, &level_report);
+    const SE3<S> solved = solve_level(level, T, level_report);
     iterations += level_report.iterations, accepted += level_report.accepted_steps;
-    // A coarse level without a solution (too few terms at its spacing)
-    // hands on its start: the finer level decides.
     if (level == 0 || level_report.converged()) T = solved;
   }
   level_report.iterations = iterations, level_report.accepted_steps = accepted;
   if (report) *report = level_report;
   return T;
+}
+
+/// Minimises the robust cost of `terms` with `solver` from `start`, coarse to
+/// fine over params.pyramid_levels levels (coarse_to_fine). `values` is
+/// reset for every level (the terms change with it).
+template <class S, Backend B, class Store, class Norm, class Solver>
+  requires RobustNorm<Norm, S> && PoseSolver<Solver, S>
+SE3<S> solve_coarse_to_fine(const B& backend, const SdfAlignmentTerms<S, Store>& terms, const Norm& norm,
+                            const SdfAlignmentParams<S>& params, const Solver& solver, const SE3<S>& start,
+                            SolveReport* report, LinearizationCache<S, B>& values) {
+  return coarse_to_fine(params.pyramid_levels, start, report, [&](int level, const SE3<S>& from, SolveReport& r) {
+    const SdfAlignmentTerms<S, Store> level_terms = at_level(terms, params, level);
+    values.reset();
+    const auto lin = [&](const SE3<S>& pose, const SE3<S>* reference) {
+      return linearize(backend, level_terms, norm, pose, reference, values);
+    };
+    return solver.solve(lin, from, &r);
+  });
 }
 
 /// Whether the frame agrees at least as well with `candidate` as with
