@@ -604,6 +604,8 @@ void run(const RunOptions& o) {
       const char* const nl = tty ? "\n" : "";
       for (const int id : r.created) fmt::print(stderr, "{}frame {}: created object {}\n", nl, i, id);
       for (const int id : r.reidentified) fmt::print(stderr, "{}frame {}: re-identified lost object {}\n", nl, i, id);
+      for (const int id : r.relocalized)
+        fmt::print(stderr, "{}frame {}: moved object {} onto its detection (relocalized)\n", nl, i, id);
       for (const int id : r.deleted)
         for (const ObjectRecord& rec : system.object_records())
           if (rec.id == id)

@@ -138,6 +138,8 @@ const std::vector<ParameterEntry<S>>& parameter_table() {
       EMF_INTEGER("lost_object_frames", lost_object_frames, "keep objects that left the view this long (0: delete)"),
       EMF_INTEGER("max_lost_objects", max_lost_objects, "most lost objects kept for re-identification"),
       EMF_NUMBER("reidentify_min_inliers", reidentify_min_inliers, "share of a detection on a lost object's surface"),
+      EMF_NUMBER("relocalize_below", relocalize_below,
+                 "move unmatched objects with a lower mean association onto a detection (0: off)"),
       EMF_BOOL("young_object_grace", young_object_grace, "new objects survive invisibility until the next detection"),
       EMF_NUMBER("min_foreground", min_foreground, "render object voxels above this p_fg"),
       EMF_NUMBER("occlusion_margin", occlusion_margin, "object loses to background this far behind (m)"),

@@ -121,6 +121,9 @@ struct FrameResult {
   /// Lost objects (deleted as not visible) that a detection brought back,
   /// with their ids; they were in an earlier frame's `deleted`.
   std::vector<int> reidentified;
+  /// Live objects that tracking had left behind, moved onto a detection
+  /// before detection handling (relocalize_below; docs/system.md).
+  std::vector<int> relocalized;
   std::vector<ObjectStatus> object_status;  ///< objects that existed before this frame, in Map::objects order
   int live_objects = 0;
   StageTimes times;

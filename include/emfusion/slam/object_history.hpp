@@ -1,7 +1,8 @@
 // What became of every object over a run, gathered from the FrameResults
 // the system returns: when it was created, lost (deleted as not visible and
 // kept for re-identification), found again, given up (a lost object kept
-// longer than lost_object_frames) or deleted, with the rule that deleted it,
+// longer than lost_object_frames), relocalized (moved onto a detection after
+// its tracking left it behind) or deleted, with the rule that deleted it,
 // and how its tracking went (frames tracked, refused, retried, started at
 // the motion prediction). The app writes it to run.json and prints it.
 #pragma once
@@ -17,7 +18,7 @@
 
 namespace emfusion {
 
-enum class ObjectEventKind { created, lost, found_again, given_up, deleted };
+enum class ObjectEventKind { created, lost, found_again, given_up, deleted, relocalized };
 
 inline const char* to_string(ObjectEventKind k) {
   switch (k) {
@@ -26,6 +27,7 @@ inline const char* to_string(ObjectEventKind k) {
     case ObjectEventKind::found_again: return "found_again";
     case ObjectEventKind::given_up: return "given_up";
     case ObjectEventKind::deleted: return "deleted";
+    case ObjectEventKind::relocalized: return "relocalized";
   }
   return "unknown";
 }
@@ -65,6 +67,7 @@ class ObjectHistories {
     }
     for (int id : r.created) event(id, ObjectEventKind::created);
     for (int id : r.reidentified) event(id, ObjectEventKind::found_again);
+    for (int id : r.relocalized) event(id, ObjectEventKind::relocalized);
     std::vector<int> lost_now;
     for (const auto& l : map.lost) lost_now.push_back(l.object->id());
     for (int id : r.deleted) {

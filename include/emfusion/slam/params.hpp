@@ -129,6 +129,12 @@ struct SystemParams {
   int lost_object_frames = 900;
   int max_lost_objects = 8;
   double reidentify_min_inliers = 0.6;
+  /// Objects left behind (docs/system.md): on a detector frame, a live
+  /// object that no detection matched and whose mean association over the
+  /// pixels it is drawn on is below this is tried against the unmatched
+  /// detections of its class, as a lost object is, and moved onto the one
+  /// it fits (reidentify_min_inliers). 0: off (the paper).
+  double relocalize_below = 0.5;
   /// An object created or re-identified on a detector frame is not deleted
   /// as not visible until it has been visible once or the detector runs
   /// again: one that enters the view across the image border would
@@ -206,6 +212,7 @@ struct SystemParams {
                     "lost_object_frames and max_lost_objects must not be negative");
     detail::require(reidentify_min_inliers > 0 && reidentify_min_inliers <= 1, w,
                     "reidentify_min_inliers must be in (0, 1]");
+    detail::require(relocalize_below >= 0 && relocalize_below <= 1, w, "relocalize_below must be in [0, 1]");
     detail::require(background_integration.max_weight > S(0) && object_integration.max_weight > S(0), w,
                     "max_weight must be positive");
   }

@@ -1,17 +1,22 @@
-// Lost objects found again (an extension of the paper; docs/system.md,
-// "Lost objects"): a detection that matches no live object is aligned to
-// every lost object of its class, and the one on whose surface enough of the
-// detection's points land returns to the map with its id and model, instead
-// of a new object being made.
+// Objects found again (extensions of the paper; docs/system.md, "Lost
+// objects" and "Objects left behind"): a detection that matches no live
+// object is aligned to every lost object of its class, and the one on whose
+// surface enough of the detection's points land returns to the map with its
+// id and model, instead of a new object being made (reidentify); before
+// that, with relocalize_below > 0, live objects that tracking left behind
+// (unmatched, weakly associated) are tried the same way and moved onto the
+// detection (relocalize_objects).
 #pragma once
 
 #include <cstddef>
 #include <cstdint>
 #include <memory>
 #include <optional>
+#include <utility>
 #include <vector>
 
 #include "emfusion/detect/detection.hpp"
+#include "emfusion/detect/matching.hpp"
 #include "emfusion/detect/proposal.hpp"
 #include "emfusion/robust/norms.hpp"
 #include "emfusion/slam/association.hpp"
@@ -37,17 +42,101 @@ struct OffSurfaceCount {
 
 }  // namespace detail::reidentification
 
+namespace detail::reidentification {
+
+/// Detection d's points as models are aligned to them: how many there are
+/// (the largest depth group of its own pixels), their centroid and viewing
+/// ray, and the detection's own pixels as a weight image on the backend.
+template <class S, Backend B>
+struct DetectionTarget {
+  std::size_t points = 0;
+  Vec3<S> centroid, ray;
+  Image<S, B> mask;
+};
+
+/// The target of detection d, or nothing when it is of a static class or
+/// has fewer than min_mask_pixels points of its own.
+template <class S, Backend B>
+std::optional<DetectionTarget<S, B>> detection_target(const Frame<S, B>& frame, const Detections& det, int d,
+                                                      const std::vector<int>& seg, const std::vector<Vec3<S>>& points,
+                                                      const PinholeCamera<S>& camera, const SystemParams<S>& params) {
+  const Instance& inst = det.instances[std::size_t(d)];
+  if (is_listed_class(inst.class_name, params.static_classes)) return std::nullopt;
+  const std::vector<Vec3<S>> p = largest_depth_group(detection_points(points, det.labels.view().data, inst.label, &seg),
+                                                     params.object_depth_gap);
+  if (int(p.size()) < params.min_mask_pixels_for(camera.width, camera.height)) return std::nullopt;
+  DetectionTarget<S, B> t;
+  t.points = p.size();
+  t.centroid = Vec3<S>::zero();
+  for (const Vec3<S>& x : p) t.centroid = t.centroid + x;
+  t.centroid = t.centroid / S(p.size());
+  t.ray = normalized(t.centroid);
+  const std::vector<std::uint8_t> own = own_mask(det, d, seg);
+  const std::vector<S> in_mask(own.begin(), own.end());
+  t.mask = Image<S, Host>::from_host(camera.width, camera.height, in_mask).template to<B>(frame.points.backend());
+  return t;
+}
+
+/// How well object `o` fits the target: aligned (`norm` in its voxels,
+/// `solver`) to the detection's points from its orientation as the camera
+/// sees it now, its box centre placed at the points' centroid pushed back
+/// along the ray by 0, 1/16, 1/8 and 3/16 of the box side (the visible
+/// surface lies in front of the object's centre; an object fills about half
+/// its box). Returns the best share of the points within a Huber delta of
+/// its surface over the converged solves (0: none) and that solve's
+/// T_volume_camera.
+template <class S, Backend B, class Norm, class Solver>
+std::pair<double, SE3<S>> fit_to_target(const ObjectModel<S, B>& o, const DetectionTarget<S, B>& target,
+                                        const Frame<S, B>& frame, const SE3<S>& T_world_camera,
+                                        const SystemParams<S>& params, const Norm& norm, const Solver& solver) {
+  const SdfAlignmentParams<S> align = alignment_params(params, params.object_integration.max_weight);
+  SdfAlignmentParams<S> count = align;
+  count.use_map_confidence = false;
+  const auto& volume = o.volume();
+  const S delta = params.huber_voxels * volume.voxel_size();
+  const Vec3<S> centre = S(0.5) * volume.view().extent();
+  const auto R = (volume.pose().inverse() * T_world_camera).rotation();
+  const S step = volume.view().extent().x() / S(16);
+  double best_inliers = 0;
+  SE3<S> best_T;
+  for (int h = 0; h < 4; ++h) {
+    const Vec3<S> at = target.centroid + (S(h) * step) * target.ray;
+    const SE3<S> start(R, centre - R * at);
+    SolveReport report;
+    const SE3<S> T = align_in_volume(volume, frame.points, &target.mask, start, scaled_norm(norm, volume.voxel_size()),
+                                     align, solver, &report);
+    if (!report.converged() || report.terms < double(params.min_object_terms)) continue;
+    const NormalEquations6 n = linearize(frame.points.backend(), make_sdf_alignment(volume, frame.points, &target.mask, count),
+                                         OffSurfaceCount<S>{delta}, T);
+    const double inliers = (n.terms - n.cost) / double(target.points);
+    if (inliers > best_inliers) best_inliers = inliers, best_T = T;
+  }
+  return {best_inliers, best_T};
+}
+
+/// The mean association of Map::objects[k] over the pixels it is drawn on
+/// (`seg` on the host), from the frame's association images; 1 when they
+/// do not cover it (the E-step did not run) or it is drawn nowhere.
+template <class S, Backend B>
+double mean_association(const Frame<S, B>& frame, const std::vector<int>& seg, int k) {
+  if (frame.associations.model_count() <= k + 1) return 1.0;
+  const std::vector<S> q = frame.associations.image(k + 1).to_host();
+  double sum = 0;
+  int n = 0;
+  for (std::size_t i = 0; i < seg.size() && i < q.size(); ++i)
+    if (seg[i] == k + 1) sum += double(q[i]), ++n;
+  return n > 0 ? sum / n : 1.0;
+}
+
+}  // namespace detail::reidentification
+
 /// Tries to bring back a lost object of detection d's class: each is
-/// aligned (`norm` in its voxels, `solver`) to the detection's points from
-/// its orientation when lost, its box centre placed at the points' centroid
-/// pushed back along the ray by 0, 1/16, 1/8 and 3/16 of the box side (the
-/// visible surface lies in front of the object's centre; an object fills
-/// about half its box); the best solve with at least
-/// params.reidentify_min_inliers of the points within a Huber delta of the
-/// surface wins. The object moves from map.lost back to map.objects at the
-/// solved pose; returns its first-view weights (`outside`: see
-/// first_view_weights). `seg` and `points` are the frame's segmentation and
-/// points on the host.
+/// aligned to the detection's points as detail::reidentification::fit_to_target
+/// says, and the best with at least params.reidentify_min_inliers of the
+/// points within a Huber delta of its surface wins. The object moves from
+/// map.lost back to map.objects at the solved pose; returns its first-view
+/// weights (`outside`: see first_view_weights). `seg` and `points` are the
+/// frame's segmentation and points on the host.
 template <class S, Backend B, class Norm, class Solver>
   requires RobustNorm<Norm, S> && PoseSolver<Solver, S>
 std::optional<NewObjectWeights<S, B>> reidentify(Map<S, B>& map, const Frame<S, B>& frame, const Detections& det,
@@ -57,46 +146,17 @@ std::optional<NewObjectWeights<S, B>> reidentify(Map<S, B>& map, const Frame<S, 
                                                  const Solver& solver, S outside) {
   if (map.lost.empty() || int(map.objects.size()) >= params.max_objects) return std::nullopt;
   const Instance& inst = det.instances[std::size_t(d)];
-  if (is_listed_class(inst.class_name, params.static_classes)) return std::nullopt;
-  const std::vector<Vec3<S>> p = largest_depth_group(detection_points(points, det.labels.view().data, inst.label, &seg),
-                                                     params.object_depth_gap);
-  if (int(p.size()) < params.min_mask_pixels_for(camera.width, camera.height)) return std::nullopt;
-  Vec3<S> centroid = Vec3<S>::zero();
-  for (const Vec3<S>& x : p) centroid = centroid + x;
-  centroid = centroid / S(p.size());
-  const Vec3<S> ray = normalized(centroid);
-  // The detection's own pixels with weight 1.
-  const B& backend = frame.points.backend();
-  const std::vector<std::uint8_t> own = own_mask(det, d, seg);
-  const std::vector<S> in_mask(own.begin(), own.end());
-  const auto mask = Image<S, Host>::from_host(camera.width, camera.height, in_mask).template to<B>(backend);
-
-  const SdfAlignmentParams<S> align = alignment_params(params, params.object_integration.max_weight);
-  SdfAlignmentParams<S> count = align;
-  count.use_map_confidence = false;
+  const auto target = detail::reidentification::detection_target(frame, det, d, seg, points, camera, params);
+  if (!target) return std::nullopt;
   int best = -1;
   double best_inliers = 0;
   SE3<S> best_T;
   for (std::size_t k = 0; k < map.lost.size(); ++k) {
     const ObjectModel<S, B>& o = *map.lost[k].object;
     if (o.class_name() != inst.class_name) continue;
-    const auto& volume = o.volume();
-    const S delta = params.huber_voxels * volume.voxel_size();
-    const Vec3<S> centre = S(0.5) * volume.view().extent();
-    const auto R = (volume.pose().inverse() * map.T_world_camera).rotation();
-    const S step = volume.view().extent().x() / S(16);
-    for (int h = 0; h < 4; ++h) {
-      const Vec3<S> at = centroid + (S(h) * step) * ray;
-      const SE3<S> start(R, centre - R * at);
-      SolveReport report;
-      const SE3<S> T = align_in_volume(volume, frame.points, &mask, start, scaled_norm(norm, volume.voxel_size()),
-                                       align, solver, &report);
-      if (!report.converged() || report.terms < double(params.min_object_terms)) continue;
-      const NormalEquations6 n = linearize(backend, make_sdf_alignment(volume, frame.points, &mask, count),
-                                           detail::reidentification::OffSurfaceCount<S>{delta}, T);
-      const double inliers = (n.terms - n.cost) / double(p.size());
-      if (inliers > best_inliers) best = int(k), best_inliers = inliers, best_T = T;
-    }
+    const auto [inliers, T] =
+        detail::reidentification::fit_to_target(o, *target, frame, map.T_world_camera, params, norm, solver);
+    if (inliers > best_inliers) best = int(k), best_inliers = inliers, best_T = T;
   }
   if (best < 0 || best_inliers < params.reidentify_min_inliers) return std::nullopt;
   std::unique_ptr<ObjectModel<S, B>> obj = std::move(map.lost[std::size_t(best)].object);
@@ -108,7 +168,67 @@ std::optional<NewObjectWeights<S, B>> reidentify(Map<S, B>& map, const Frame<S, 
   rec.deleted = false;
   rec.reason = DeletionReason::none;
   map.objects.push_back(std::move(obj));
-  return first_view_weights(det, d, seg, outside, camera, backend);
+  return first_view_weights(det, d, seg, outside, camera, frame.points.backend());
+}
+
+/// Stage 5a, before detection handling (an extension of the paper;
+/// docs/system.md, "Objects left behind"): a live object whose tracking
+/// could not follow a fast move stays drawn where the object was, and the
+/// detection of the object, matching no live object, would make a second
+/// one. With params.relocalize_below > 0, every detection that matches no
+/// live object (mask IoU, as handle_detections) is tried against the live
+/// objects of its class that no detection matched and whose mean
+/// association over the pixels they are drawn on is below
+/// params.relocalize_below: each is aligned to the detection's points as a
+/// lost object is (reidentify), and the best with at least
+/// reidentify_min_inliers of the points on its surface moves there, with
+/// its id and model. Returns the ids of the objects moved; when there are
+/// any, the frame's associations and rendering are out of date: associate
+/// and render_models again before detection handling, which then matches
+/// the detection to the moved object (System does).
+template <class S, Backend B, class Norm, class Solver>
+  requires RobustNorm<Norm, S> && PoseSolver<Solver, S>
+std::vector<int> relocalize_objects(Map<S, B>& map, const Frame<S, B>& frame, const Detections& det,
+                                    const std::vector<int>& seg, const PinholeCamera<S>& camera,
+                                    const SystemParams<S>& params, const Norm& norm, const Solver& solver) {
+  std::vector<int> moved;
+  if (!(params.relocalize_below > 0) || map.objects.empty() || det.instances.empty()) return moved;
+  const DetectionMatch match = match_detections(mask_iou(det, seg, int(map.objects.size())), params.match_iou);
+  std::vector<bool> candidate(map.objects.size(), true);
+  for (int o : match.object_of)
+    if (o >= 0) candidate[std::size_t(o)] = false;
+  for (std::size_t k = 0; k < map.objects.size(); ++k)
+    if (candidate[k])
+      candidate[k] = !params.ignores(map.objects[k]->class_name()) &&
+                     detail::reidentification::mean_association(frame, seg, int(k)) < params.relocalize_below;
+  const std::vector<Vec3<S>> points = frame.points.to_host();
+  for (std::size_t d = 0; d < det.instances.size(); ++d) {
+    if (match.object_of[d] >= 0) continue;
+    const Instance& inst = det.instances[d];
+    const bool any = [&] {
+      for (std::size_t k = 0; k < map.objects.size(); ++k)
+        if (candidate[k] && map.objects[k]->class_name() == inst.class_name) return true;
+      return false;
+    }();
+    if (!any) continue;
+    const auto target = detail::reidentification::detection_target(frame, det, int(d), seg, points, camera, params);
+    if (!target) continue;
+    int best = -1;
+    double best_inliers = 0;
+    SE3<S> best_T;
+    for (std::size_t k = 0; k < map.objects.size(); ++k) {
+      if (!candidate[k] || map.objects[k]->class_name() != inst.class_name) continue;
+      const auto [inliers, T] = detail::reidentification::fit_to_target(*map.objects[k], *target, frame,
+                                                                         map.T_world_camera, params, norm, solver);
+      if (inliers > best_inliers) best = int(k), best_inliers = inliers, best_T = T;
+    }
+    if (best < 0 || best_inliers < params.reidentify_min_inliers) continue;
+    ObjectModel<S, B>& obj = *map.objects[std::size_t(best)];
+    obj.set_pose(map.T_world_camera * best_T.inverse() * obj.T_object_volume().inverse());
+    candidate[std::size_t(best)] = false;
+    moved.push_back(obj.id());
+  }
+  return moved;
 }
 
 }  // namespace emfusion

@@ -121,9 +121,21 @@ class System {
     }
     // Detection handling reads the segmentation on the host (detector
     // frames only); it does not change for the rest of the frame.
-    const std::vector<int> seg = detections ? frame_.segmentation.to_host() : std::vector<int>{};
+    std::vector<int> seg = detections ? frame_.segmentation.to_host() : std::vector<int>{};
     Detections checked;
     const Detections* det = detections ? &usable_detections(*detections, checked, result) : nullptr;
+    if (det) {
+      // Objects left behind by their tracking move onto their detection
+      // first (off unless relocalize_below > 0); the frame's E-step and
+      // rendering are then redone at their new poses.
+      result.relocalized =
+          relocalize_objects(map_, frame_, *det, seg, camera_, params_, parts_.object_norm, parts_.solver);
+      if (!result.relocalized.empty()) {
+        associate(map_, frame_, parts_.likelihood, params_);
+        render_models(map_, frame_, camera_, params_, render_workspace_);
+        seg = frame_.segmentation.to_host();
+      }
+    }
     DetectionUpdate<S, B> update;
     if (det)
       update = handle_detections(map_, frame_, *det, seg, camera_, params_, parts_.likelihood, parts_.object_norm,
