@@ -14,6 +14,7 @@
 #include "support/configs.hpp"
 #include "support/files.hpp"
 #include "support/fusion.hpp"
+#include "support/system_instances.hpp"
 
 using namespace emfusion;
 using emfusion::test::contains;

@@ -21,7 +21,7 @@
 #include <utility>
 #include <vector>
 
-#include "emfusion/slam/system.hpp"
+#include "support/system_instances.hpp"
 #include "support/catch.hpp"
 #include "support/configs.hpp"
 #include "support/room.hpp"

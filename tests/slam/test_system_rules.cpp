@@ -13,7 +13,7 @@
 #include <utility>
 #include <vector>
 
-#include "emfusion/slam/system.hpp"
+#include "support/system_instances.hpp"
 #include "emfusion/volume/marching_cubes.hpp"
 #include "support/catch.hpp"
 #include "support/configs.hpp"
