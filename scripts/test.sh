@@ -83,6 +83,7 @@ if [[ -n "$nvcc_path" ]]; then
     -DEMFUSION_CUDA=ON \
     -DCMAKE_CUDA_COMPILER="$nvcc_path" \
     -DCMAKE_CUDA_ARCHITECTURES=90-virtual \
+    -DCMAKE_CUDA_FLAGS_RELEASE=-DNDEBUG -DCMAKE_CXX_FLAGS_RELEASE=-DNDEBUG \
     -DCMAKE_BUILD_TYPE=Release \
     -DEMFUSION_WERROR=ON
   # The app and the camera tracker instantiate every algorithm on the CUDA
@@ -94,6 +95,8 @@ if [[ -n "$nvcc_path" ]]; then
   # they run, on the GPU machine. 90-virtual: PTX only, no machine code (the
   # whole C++ and CUDA front end and NVVM, not ptxas): 222 s instead of 263 s
   # for the app's unit on this machine; the GPU machine builds sm_90 code.
+  # Host code unoptimised (no -O3 in the Release flags): a check that it
+  # compiles, not a build to run.
   say "CUDA build: building emfusion_cuda_compile_check (emfusion_app track_camera) with -j${jobs}"
   cmake --build build-cuda -j "$jobs" --target emfusion_cuda_compile_check
   say "CUDA build: compiled emfusion_app and track_camera in build-cuda/ but did NOT run them (no GPU is assumed here)."
