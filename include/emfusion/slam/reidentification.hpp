@@ -12,6 +12,7 @@
 #include <cstdint>
 #include <memory>
 #include <optional>
+#include <string>
 #include <utility>
 #include <vector>
 
@@ -194,23 +195,33 @@ std::vector<int> relocalize_objects(Map<S, B>& map, const Frame<S, B>& frame, co
   std::vector<int> moved;
   if (!(params.relocalize_below > 0) || map.objects.empty() || det.instances.empty()) return moved;
   const DetectionMatch match = match_detections(mask_iou(det, seg, int(map.objects.size())), params.match_iou);
+  // Candidates: unmatched objects of a class some unmatched detection has,
+  // weakly associated. Their association images and the frame's points are
+  // read on the host only when there is one.
+  const auto unmatched_detection_of = [&](const std::string& class_name) {
+    for (std::size_t d = 0; d < det.instances.size(); ++d)
+      if (match.object_of[d] < 0 && det.instances[d].class_name == class_name) return true;
+    return false;
+  };
   std::vector<bool> candidate(map.objects.size(), true);
   for (int o : match.object_of)
     if (o >= 0) candidate[std::size_t(o)] = false;
-  for (std::size_t k = 0; k < map.objects.size(); ++k)
-    if (candidate[k])
-      candidate[k] = !params.ignores(map.objects[k]->class_name()) &&
-                     detail::reidentification::mean_association(frame, seg, int(k)) < params.relocalize_below;
+  bool any = false;
+  for (std::size_t k = 0; k < map.objects.size(); ++k) {
+    const std::string& class_name = map.objects[k]->class_name();
+    candidate[k] = candidate[k] && !params.ignores(class_name) && unmatched_detection_of(class_name) &&
+                   detail::reidentification::mean_association(frame, seg, int(k)) < params.relocalize_below;
+    any = any || candidate[k];
+  }
+  if (!any) return moved;
   const std::vector<Vec3<S>> points = frame.points.to_host();
   for (std::size_t d = 0; d < det.instances.size(); ++d) {
     if (match.object_of[d] >= 0) continue;
     const Instance& inst = det.instances[d];
-    const bool any = [&] {
-      for (std::size_t k = 0; k < map.objects.size(); ++k)
-        if (candidate[k] && map.objects[k]->class_name() == inst.class_name) return true;
-      return false;
-    }();
-    if (!any) continue;
+    bool of_its_class = false;
+    for (std::size_t k = 0; k < map.objects.size(); ++k)
+      of_its_class = of_its_class || (candidate[k] && map.objects[k]->class_name() == inst.class_name);
+    if (!of_its_class) continue;
     const auto target = detail::reidentification::detection_target(frame, det, int(d), seg, points, camera, params);
     if (!target) continue;
     int best = -1;

@@ -120,13 +120,13 @@ class System {
       return finish(result, clock);
     }
     // Detection handling reads the segmentation on the host (detector
-    // frames only); it does not change for the rest of the frame.
+    // frames only); it changes only when objects are relocalized below.
     std::vector<int> seg = detections ? frame_.segmentation.to_host() : std::vector<int>{};
     Detections checked;
     const Detections* det = detections ? &usable_detections(*detections, checked, result) : nullptr;
     if (det) {
       // Objects left behind by their tracking move onto their detection
-      // first (off unless relocalize_below > 0); the frame's E-step and
+      // first (relocalize_below; 0 turns it off); the frame's E-step and
       // rendering are then redone at their new poses.
       result.relocalized =
           relocalize_objects(map_, frame_, *det, seg, camera_, params_, parts_.object_norm, parts_.solver);
