@@ -553,6 +553,19 @@ def object_metrics(name, k, labels, frame_t, fps, det_every, est_frames, kind):
     return r
 
 
+def merged_ids(path):
+    """The ids run.json says were merged into another object (event "merged"); none
+    when there is no run.json (io/run_json.hpp, read_merged_object_ids)."""
+    if not os.path.isfile(path):
+        return set()
+    try:
+        run = json.load(open(path))
+    except ValueError as e:
+        raise SystemExit('%s: not valid JSON: %s' % (path, e))
+    return {int(o['id']) for o in run.get('objects', [])
+            if any(e.get('event') == 'merged' for e in o.get('events', []))}
+
+
 def evaluate_run(seq, out, kind):
     """All numbers of one run: camera ATE, per truth object, false objects."""
     import numpy as np
@@ -566,8 +579,11 @@ def evaluate_run(seq, out, kind):
     gt_cam, est_cam = srt(gt_cam), srt(est_cam)
     truth = {o['name']: read_tum(os.path.join(seq, 'groundtruth_objects', o['name'] + '.txt')) for o in info['objects']}
     estimates, classes = {}, {}
+    merged = merged_ids(os.path.join(out, 'run.json'))
     for r in read_list(os.path.join(out, 'objects.txt')):
         i = int(r[0])
+        if i in merged:  # its poses are in the trajectory of the object it was merged into
+            continue
         classes[i] = r[1]
         p = os.path.join(out, 'objects', '%d.txt' % i)
         estimates[i] = read_tum(p) if os.path.isfile(p) else (np.zeros(0), np.zeros((0, 4, 4)))
@@ -840,6 +856,15 @@ def selftest():
     by, unmatched = match_objects((t, ec), (t, gc), {1: (t, eo), 2: (t[:2], eo[:2]), 3: (t, eo_far)},
                                   {'a': (t, go), 'b': (t, go_far)})
     assert by == {'a': [1], 'b': []} and unmatched == [2, 3], (by, unmatched)
+    # merged ids from run.json: only objects with a "merged" event; no file, none
+    import tempfile
+    with tempfile.TemporaryDirectory() as d:
+        p = os.path.join(d, 'run.json')
+        assert merged_ids(p) == set()
+        with open(p, 'w') as f:
+            json.dump({'objects': [{'id': 1, 'events': [{'event': 'absorbed', 'from': 4}]},
+                                   {'id': 4, 'events': [{'event': 'created'}, {'event': 'merged', 'into': 1}]}]}, f)
+        assert merged_ids(p) == {4}
     print('selftest: all checks passed')
     return 0
 

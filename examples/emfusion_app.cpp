@@ -330,6 +330,8 @@ void write_object_histories(Json& json, const ObjectHistories& histories, const 
     for (const ObjectEvent& e : h.events) {
       line += fmt::format("{}{} {}", line.empty() ? "" : ", ", to_string(e.kind), e.frame);
       if (e.kind == ObjectEventKind::deleted) line += fmt::format(" ({})", to_string(e.reason));
+      if (e.kind == ObjectEventKind::merged) line += fmt::format(" (into {})", e.other);
+      if (e.kind == ObjectEventKind::absorbed) line += fmt::format(" (object {})", e.other);
     }
     fmt::print("object {} ({}): {}; tracked {}, refused {}, retried {}\n", id, class_name,
                line.empty() ? "no events" : line, h.tracked, h.refused, h.retried);
@@ -646,8 +648,9 @@ void run(const RunOptions& o) {
   const std::vector<ObjectListEntry> list = object_list(system.object_records());
   write_object_list((out / "objects.txt").string(), list);
   std::map<int, Trajectory> est_objects;
+  // A model merged into another has its poses in the other's trajectory too.
   for (const ObjectRecord& r : system.object_records())
-    if (!r.person) est_objects[r.id] = r.trajectory;
+    if (!r.person && r.reason != DeletionReason::merged) est_objects[r.id] = r.trajectory;
   write_meshes(out / "meshes", system.map());
 
   Json json = run_summary(interrupted ? "interrupted" : "finished", processed);
@@ -720,9 +723,13 @@ void evaluate(const std::string& sequence, const std::string& output) {
   const Trajectory est_cam = read_tum_trajectory((fs::path(output) / "camera.txt").string());
   std::map<int, Trajectory> est_objects;
   const std::string list = (fs::path(output) / "objects.txt").string();
+  // Objects run.json says were merged into another are counted as that one.
+  const std::string run_json = (fs::path(output) / "run.json").string();
+  const std::vector<int> merged = fs::exists(run_json) ? read_merged_object_ids(run_json) : std::vector<int>{};
   if (fs::exists(list))
     for (const auto& e : read_object_list(list))
-      est_objects[e.id] = read_tum_trajectory((fs::path(output) / "objects" / (std::to_string(e.id) + ".txt")).string());
+      if (std::find(merged.begin(), merged.end(), e.id) == merged.end())
+        est_objects[e.id] = read_tum_trajectory((fs::path(output) / "objects" / (std::to_string(e.id) + ".txt")).string());
   Json json;
   json["sequence"] = sequence;
   json["output"] = output;

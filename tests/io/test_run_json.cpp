@@ -153,6 +153,39 @@ TEST_CASE("run.json's object histories: counts, events and the deletion rule", "
   CHECK(empty.at("events").empty());
 }
 
+TEST_CASE("run.json: a merge says into which object; the merged ids read back; bad files are named", "[io]") {
+  ObjectHistory a, b;
+  a.id = 1, b.id = 4;
+  a.events = {{0, 0.0, ObjectEventKind::created, DeletionReason::none},
+              {90, 3.0, ObjectEventKind::absorbed, DeletionReason::none, 4}};
+  b.events = {{40, 1.3, ObjectEventKind::created, DeletionReason::none},
+              {90, 3.0, ObjectEventKind::merged, DeletionReason::merged, 1}};
+  const Json ja = object_history_json(a, "cup"), jb = object_history_json(b, "cup");
+  const nlohmann::json back_a = nlohmann::json::parse(json_text(ja)), back_b = nlohmann::json::parse(json_text(jb));
+  CHECK(back_a.at("events")[1].at("event").get<std::string>() == "absorbed");
+  CHECK(back_a.at("events")[1].at("from").get<int>() == 4);
+  CHECK(back_b.at("events")[1].at("event").get<std::string>() == "merged");
+  CHECK(back_b.at("events")[1].at("into").get<int>() == 1);
+  CHECK_FALSE(back_b.at("events")[1].contains("from"));
+
+  ScratchDir dir;
+  Json run;
+  run["frames"] = 100;
+  run["objects"] = Json::array({ja, jb});
+  CHECK(read_merged_object_ids(dir.write("run.json", json_text(run))) == std::vector<int>{4});
+  CHECK(read_merged_object_ids(dir.write("none.json", "{\"frames\": 3}")).empty());  // no objects: none merged
+  const auto error = [&](const std::string& name, const std::string& text) {
+    return error_of([&] { read_merged_object_ids(dir.write(name, text)); });
+  };
+  CHECK(contains(error("cut.json", "{\"objects\": [{\"id\": 1, "), "cut.json"));
+  CHECK(contains(error("cut.json", "{\"objects\": [{\"id\": 1, "), "not valid JSON"));
+  CHECK(contains(error("array.json", "[1, 2]"), "not a JSON object"));
+  CHECK(contains(error("objects.json", "{\"objects\": 3}"), "\"objects\" is not an array"));
+  CHECK(contains(error("id.json", "{\"objects\": [{\"id\": \"x\"}]}"), "integer \"id\""));
+  CHECK(contains(error("events.json", "{\"objects\": [{\"id\": 2, \"events\": {}}]}"), "object 2"));
+  CHECK(contains(error_of([&] { read_merged_object_ids(dir.file("missing.json")); }), "missing.json"));
+}
+
 TEST_CASE("JSON text: bytes that are not UTF-8 are replaced, not fatal; a bad path names itself", "[io]") {
   Json j;
   j["input"] = std::string("seq-\xff\xfe");  // a path from a filesystem of another encoding

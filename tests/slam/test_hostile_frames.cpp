@@ -694,4 +694,22 @@ TEST_CASE("Hostile frames: the guards' parameters are validated", "[slam]") {
         std::string::npos);
   CHECK(error([](SystemParams<float>& p) { p.reidentify_min_inliers = NAN; }).find("reidentify_min_inliers") !=
         std::string::npos);
+  // Objects left behind, duplicates, the visibility hysteresis: 0 turns the
+  // first two off; NaN and values outside their range are refused.
+  const auto named = [&](void (*set)(SystemParams<float>&), const char* name) {
+    return error(set).find(name) != std::string::npos;
+  };
+  CHECK(error([](SystemParams<float>& p) { p.relocalize_below = 0; }).empty());
+  CHECK(named([](SystemParams<float>& p) { p.relocalize_below = -0.1; }, "relocalize_below"));
+  CHECK(named([](SystemParams<float>& p) { p.relocalize_below = 1.5; }, "relocalize_below"));
+  CHECK(named([](SystemParams<float>& p) { p.relocalize_below = NAN; }, "relocalize_below"));
+  CHECK(error([](SystemParams<float>& p) { p.merge_min_inliers = 0; }).empty());
+  CHECK(error([](SystemParams<float>& p) { p.merge_min_inliers = 1; }).empty());
+  CHECK(named([](SystemParams<float>& p) { p.merge_min_inliers = -1; }, "merge_min_inliers"));
+  CHECK(named([](SystemParams<float>& p) { p.merge_min_inliers = 1.01; }, "merge_min_inliers"));
+  CHECK(named([](SystemParams<float>& p) { p.merge_min_inliers = NAN; }, "merge_min_inliers"));
+  CHECK(error([](SystemParams<float>& p) { p.keep_visible_fraction = 0.5; }).empty());
+  CHECK(named([](SystemParams<float>& p) { p.keep_visible_fraction = 0; }, "keep_visible_fraction"));
+  CHECK(named([](SystemParams<float>& p) { p.keep_visible_fraction = 2; }, "keep_visible_fraction"));
+  CHECK(named([](SystemParams<float>& p) { p.keep_visible_fraction = NAN; }, "keep_visible_fraction"));
 }

@@ -2,6 +2,7 @@
 // of each object, gathered from hand-made FrameResults and a map's lost
 // list and records.
 #include <memory>
+#include <string>
 
 #include "emfusion/slam/object_history.hpp"
 #include "support/catch.hpp"
@@ -82,4 +83,42 @@ TEST_CASE("Object histories: created, tracked, retried, lost, found again, given
   CHECK(b.events[1].kind == ObjectEventKind::deleted);
   CHECK(b.events[1].reason == DeletionReason::existence);
   CHECK(std::string(to_string(ObjectEventKind::found_again)) == "found_again");
+}
+
+TEST_CASE("Object histories: a merge ends one id and the other goes on; a lost one merged is not given up",
+          "[slam]") {
+  SystemParams<S> params;
+  params.background_voxels = 8;
+  Map<S, Host> map(params);
+  map.records = {ObjectRecord{}, ObjectRecord{}};
+  map.records[0].id = 1, map.records[1].id = 2;
+  ObjectHistories h;
+  FrameResult r = frame(0);
+  r.created = {1};
+  h.add(r, map);
+  r = frame(1);  // 1 lost, then 2 made from the same object
+  r.deleted = {1};
+  map.records[0].reason = DeletionReason::not_visible;
+  map.lost.push_back(LostObject<S, Host>{object(1), 1});
+  h.add(r, map);
+  r = frame(2);
+  r.created = {2};
+  h.add(r, map);
+  r = frame(6);  // found to be one: 1 takes 2 over and leaves the lost list
+  r.merged = {ObjectMerge{2, 1}};
+  map.lost.clear();
+  h.add(r, map);
+
+  const ObjectHistory& a = h.objects().at(1);
+  const ObjectHistory& b = h.objects().at(2);
+  REQUIRE(a.events.size() == 3);
+  CHECK(a.events[2].kind == ObjectEventKind::absorbed);
+  CHECK(a.events[2].other == 2);
+  CHECK(a.events[2].frame == 6);
+  REQUIRE(b.events.size() == 2);
+  CHECK(b.events[1].kind == ObjectEventKind::merged);
+  CHECK(b.events[1].other == 1);
+  CHECK(b.events[1].reason == DeletionReason::merged);
+  CHECK(std::string(to_string(ObjectEventKind::merged)) == "merged");
+  CHECK(std::string(to_string(DeletionReason::merged)) == "merged");
 }

@@ -4,8 +4,8 @@
 // poses, one camera tracking step, rendering, resizing from a detection,
 // deletion by the existence rule, and the rules counted only where the
 // object is visible, with unseen and weakly associated objects kept as lost,
-// and an object left behind by its tracking moved onto its detection;
-// then the full system with a
+// an object left behind by its tracking moved onto its detection, and two
+// models of one object merged; then the full system with a
 // likelihood, a norm and a solver defined here, as a user would.
 #include <cmath>
 #include <cstdint>
@@ -361,6 +361,131 @@ TEMPLATE_LIST_TEST_CASE("Stages alone: an object left behind by its tracking mov
 }
 
 namespace {
+
+TEMPLATE_LIST_TEST_CASE("Stages alone: two models of one object merge into the older id", "[slam]",
+                        emfusion::test::AllConfigs) {
+  using S = typename TestType::Scalar;
+  using B = typename TestType::Backend;
+  OneFrameMap<S, B> m;
+  REQUIRE(m.map.objects.size() == 1);
+  PaperLikelihood<S> likelihood;
+  likelihood.params = m.s.params.likelihood;
+  const HuberNorm<S> huber{S(2)};
+  const S outside = unexplained_association<S>(likelihood);
+  const int a_id = m.map.objects[0]->id();
+  const SE3<S> a_pose = m.map.objects[0]->pose();
+  m.map.record_poses(0.0);
+  const auto weight_sum = [](const ObjectModel<S, B>& o) {
+    double sum = 0;
+    for (S w : o.volume().weight_to_host()) sum += double(w);
+    return sum;
+  };
+  const auto observe = [&] {
+    preprocess(m.depth, m.s.camera, m.s.params, m.frame);
+    associate(m.map, m.frame, likelihood, m.s.params);
+    render_models(m.map, m.frame, m.s.camera, m.s.params, m.workspace);
+  };
+  // A second model of the box from a detection at time t (what a missed
+  // re-identification, or a creation beside an object, leaves).
+  const auto make_second = [&](double t, const Detections& det) {
+    observe();
+    const std::vector<int> seg = m.frame.segmentation.to_host();
+    FrameResult r;
+    auto w = create_object(m.map, det, 0, seg, m.frame.points.to_host(), m.s.camera, m.s.params, outside, r);
+    REQUIRE(w);
+    std::vector<NewObjectWeights<S, B>> fresh;
+    fresh.push_back(std::move(*w));
+    integrate_models(m.map, m.frame, m.s.camera, m.s.params, fresh, false);
+    update_foreground_counts(m.map, m.frame, det, seg, {-1}, fresh, m.s.camera);
+    m.map.record_poses(t);
+    return r.created.at(0);
+  };
+  // A detector frame at time t: matching, then the merge stage.
+  const auto detector_frame = [&](double t, const Detections& det) {
+    observe();
+    const std::vector<int> seg = m.frame.segmentation.to_host();
+    std::vector<int> ids_drawn;
+    for (const auto& o : m.map.objects) ids_drawn.push_back(o->id());
+    FrameResult r;
+    const DetectionUpdate<S, B> update = handle_detections(m.map, m.frame, det, seg, m.s.camera, m.s.params,
+                                                           likelihood, huber, LevenbergMarquardt{}, r);
+    m.map.record_poses(t);
+    return merge_objects(m.map, m.frame, det, seg, update.object_of_detection, ids_drawn, m.s.camera, m.s.params,
+                         huber, LevenbergMarquardt{});
+  };
+  const auto lose_first = [&] {
+    ObjectRecord& rec = m.map.record_of(a_id);
+    rec.deleted = true;
+    rec.reason = DeletionReason::not_visible;
+    m.map.lost.push_back(LostObject<S, B>{std::move(m.map.objects[0]), 0});
+    m.map.objects.clear();
+  };
+  const Detections cup = box_detection(m.labels, "cup");
+
+  SECTION("a lost object and the model made of it later: the lost one goes on, with both models and one trajectory") {
+    lose_first();
+    const double a_weight = weight_sum(*m.map.lost[0].object);
+    const int b_id = make_second(1.0, cup);
+    const std::vector<ObjectMerge> merges = detector_frame(2.0, cup);
+    REQUIRE(merges.size() == 1);
+    CHECK(merges[0].from == b_id);
+    CHECK(merges[0].into == a_id);
+    REQUIRE(m.map.objects.size() == 1);
+    CHECK(m.map.objects[0]->id() == a_id);
+    CHECK(m.map.lost.empty());
+    CHECK(double(norm(m.map.objects[0]->pose().translation() - a_pose.translation())) < 0.01);
+    CHECK(weight_sum(*m.map.objects[0]) > 1.5 * a_weight);  // the second model's two frames fused in
+    CHECK(m.map.objects[0]->existence_count() == 3);        // created once, then two detections
+    const ObjectRecord& a = m.map.record_of(a_id);
+    const ObjectRecord& b = m.map.record_of(b_id);
+    CHECK_FALSE(a.deleted);
+    CHECK(b.deleted);
+    CHECK(b.reason == DeletionReason::merged);
+    REQUIRE(a.trajectory.size() == 3);  // its own pose, then the second model's two, in its own frame
+    for (const TimedPose& p : a.trajectory)
+      CHECK(norm(p.pose.translation() - a_pose.template cast<double>().translation()) < 0.01);
+    CHECK(a.trajectory[1].timestamp == 1.0);
+    CHECK(a.last_timestamp == 2.0);
+    CHECK(b.trajectory.size() == 2);  // its trajectory ends
+  }
+  SECTION("off (0): both stay") {
+    m.s.params.merge_min_inliers = 0;
+    lose_first();
+    make_second(1.0, cup);
+    CHECK(detector_frame(2.0, cup).empty());
+    CHECK(m.map.objects.size() == 1);
+    CHECK(m.map.lost.size() == 1);
+  }
+  SECTION("a lost object of another class, or lost after the other was made, is another object") {
+    lose_first();
+    SECTION("another class") {
+      const Detections book = box_detection(m.labels, "book");
+      make_second(1.0, book);
+      CHECK(detector_frame(2.0, book).empty());
+    }
+    SECTION("both existed at once") {
+      make_second(1.0, cup);
+      m.map.record_of(a_id).last_timestamp = 1.5;
+      CHECK(detector_frame(2.0, cup).empty());
+    }
+    CHECK(m.map.lost.size() == 1);
+  }
+  SECTION("two live models in one place: the unmatched one merges, the older id goes on") {
+    // The second is made while the first is drawn elsewhere; then both are on the box.
+    m.map.objects[0]->set_pose(SE3<S>::translation(vec3(S(0), S(0), S(-5))) * a_pose);
+    const int b_id = make_second(1.0, cup);
+    m.map.objects[0]->set_pose(a_pose);
+    REQUIRE(m.map.objects.size() == 2);
+    const std::vector<ObjectMerge> merges = detector_frame(2.0, cup);
+    REQUIRE(merges.size() == 1);
+    CHECK(merges[0].from == b_id);
+    CHECK(merges[0].into == a_id);
+    REQUIRE(m.map.objects.size() == 1);
+    CHECK(m.map.objects[0]->id() == a_id);
+    CHECK(m.map.record_of(b_id).reason == DeletionReason::merged);
+    CHECK(m.map.record_of(a_id).trajectory.size() == 3);  // it was tracked throughout: nothing carried over
+  }
+}
 
 /// A user's likelihood, with parameters of its own: a Gaussian on the SDF
 /// (instead of the paper's Laplace) times p_fg, plus a constant outlier

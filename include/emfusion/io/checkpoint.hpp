@@ -431,7 +431,7 @@ Checkpoint<S, B> parse_checkpoint(const std::string& data, const std::string& so
     rec.last_timestamp = r.f64("an object record");
     rec.deleted = r.flag("an object record's deleted flag");
     const unsigned reason = r.u8("an object record");
-    if (reason > unsigned(DeletionReason::weak_association))
+    if (reason > unsigned(DeletionReason::merged))
       r.fail("object record " + std::to_string(rec.id) + ": unknown deletion reason " + std::to_string(reason));
     rec.reason = DeletionReason(reason);
     rec.person = r.flag("an object record's person flag");

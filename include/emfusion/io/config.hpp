@@ -140,6 +140,8 @@ const std::vector<ParameterEntry<S>>& parameter_table() {
       EMF_NUMBER("reidentify_min_inliers", reidentify_min_inliers, "share of a detection on a lost object's surface"),
       EMF_NUMBER("relocalize_below", relocalize_below,
                  "move unmatched objects with a lower mean association onto a detection (0: off)"),
+      EMF_NUMBER("merge_min_inliers", merge_min_inliers,
+                 "merge two models of one object when this share of a detection fits both (0: off)"),
       EMF_BOOL("young_object_grace", young_object_grace, "new objects survive invisibility until the next detection"),
       EMF_NUMBER("min_foreground", min_foreground, "render object voxels above this p_fg"),
       EMF_NUMBER("occlusion_margin", occlusion_margin, "object loses to background this far behind (m)"),

@@ -18,7 +18,7 @@ struct StageTimes {
 };
 
 /// Why an object left the map.
-enum class DeletionReason { none, existence, not_visible, weak_association };
+enum class DeletionReason { none, existence, not_visible, weak_association, merged };
 
 inline const char* to_string(DeletionReason r) {
   switch (r) {
@@ -26,6 +26,7 @@ inline const char* to_string(DeletionReason r) {
     case DeletionReason::existence: return "existence";
     case DeletionReason::not_visible: return "not_visible";
     case DeletionReason::weak_association: return "weak_association";
+    case DeletionReason::merged: return "merged";
   }
   return "unknown";
 }
@@ -99,6 +100,13 @@ struct ObjectStatus {
   DeletionReason deleted = DeletionReason::none;
 };
 
+/// Two models found to be one object (slam/merging.hpp): `from` ended, its
+/// model fused into `into`, which goes on with the older of the two ids.
+struct ObjectMerge {
+  int from = 0;
+  int into = 0;
+};
+
 /// What happened in one frame.
 struct FrameResult {
   int frame = 0;
@@ -124,6 +132,9 @@ struct FrameResult {
   /// Live objects that tracking had left behind, moved onto a detection
   /// before detection handling (relocalize_below; docs/system.md).
   std::vector<int> relocalized;
+  /// Objects found to be one (merge_min_inliers; docs/system.md, "Merging
+  /// duplicates"): each `from` left the map (live or lost) and goes on as `into`.
+  std::vector<ObjectMerge> merged;
   std::vector<ObjectStatus> object_status;  ///< objects that existed before this frame, in Map::objects order
   int live_objects = 0;
   StageTimes times;

@@ -2,7 +2,8 @@
 // the system returns: when it was created, lost (deleted as not visible and
 // kept for re-identification), found again, given up (a lost object kept
 // longer than lost_object_frames), relocalized (moved onto a detection after
-// its tracking left it behind) or deleted, with the rule that deleted it,
+// its tracking left it behind), merged into another model of the same
+// object or absorbing one (merging.hpp) or deleted, with the rule that deleted it,
 // and how its tracking went (frames tracked, refused, retried, started at
 // the motion prediction). The app writes it to run.json and prints it.
 #pragma once
@@ -18,7 +19,7 @@
 
 namespace emfusion {
 
-enum class ObjectEventKind { created, lost, found_again, given_up, deleted, relocalized };
+enum class ObjectEventKind { created, lost, found_again, given_up, deleted, relocalized, merged, absorbed };
 
 inline const char* to_string(ObjectEventKind k) {
   switch (k) {
@@ -28,6 +29,8 @@ inline const char* to_string(ObjectEventKind k) {
     case ObjectEventKind::given_up: return "given_up";
     case ObjectEventKind::deleted: return "deleted";
     case ObjectEventKind::relocalized: return "relocalized";
+    case ObjectEventKind::merged: return "merged";
+    case ObjectEventKind::absorbed: return "absorbed";
   }
   return "unknown";
 }
@@ -37,6 +40,8 @@ struct ObjectEvent {
   double timestamp = 0;
   ObjectEventKind kind = ObjectEventKind::created;
   DeletionReason reason = DeletionReason::none;  ///< for `deleted`: the rule
+  /// For `merged`: the object it went on as; for `absorbed`: the object it took over.
+  int other = 0;
 };
 
 /// One object's life.
@@ -55,8 +60,9 @@ class ObjectHistories {
  public:
   template <class S, Backend B>
   void add(const FrameResult& r, const Map<S, B>& map) {
-    const auto event = [&](int id, ObjectEventKind kind, DeletionReason reason = DeletionReason::none) {
-      history(id).events.push_back({r.frame, r.timestamp, kind, reason});
+    const auto event = [&](int id, ObjectEventKind kind, DeletionReason reason = DeletionReason::none,
+                           int other = 0) {
+      history(id).events.push_back({r.frame, r.timestamp, kind, reason, other});
     };
     for (const ObjectStatus& s : r.object_status) {
       ObjectHistory& h = history(s.id);
@@ -77,11 +83,18 @@ class ObjectHistories {
         if (rec.id == id) reason = rec.reason;
       event(id, kept ? ObjectEventKind::lost : ObjectEventKind::deleted, reason);
     }
-    // Lost objects that left the lost list without being found again.
+    for (const ObjectMerge& m : r.merged) {
+      event(m.from, ObjectEventKind::merged, DeletionReason::merged, m.into);
+      event(m.into, ObjectEventKind::absorbed, DeletionReason::none, m.from);
+    }
+    // Lost objects that left the lost list without being found again or merged.
+    const auto merged = [&](int id) {
+      return std::any_of(r.merged.begin(), r.merged.end(), [&](const ObjectMerge& m) { return m.from == id || m.into == id; });
+    };
     for (int id : lost_) {
       const bool still = std::find(lost_now.begin(), lost_now.end(), id) != lost_now.end();
       const bool found = std::find(r.reidentified.begin(), r.reidentified.end(), id) != r.reidentified.end();
-      if (!still && !found) event(id, ObjectEventKind::given_up);
+      if (!still && !found && !merged(id)) event(id, ObjectEventKind::given_up);
     }
     lost_ = std::move(lost_now);
   }

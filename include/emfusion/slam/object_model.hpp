@@ -119,6 +119,13 @@ class ObjectModel {
     class_name_ = best->first;
   }
   const std::vector<std::pair<std::string, double>>& class_scores() const { return class_scores_; }
+  /// Takes over another model's existence counts and class scores (two
+  /// models found to be one object, slam/merging.hpp).
+  void add_counts_of(const ObjectModel& other) {
+    existence_ += other.existence_;
+    non_existence_ += other.non_existence_;
+    for (const auto& [name, score] : other.class_scores_) add_class_score(name, score);
+  }
 
   /// Grows the volume so that the volume-frame box [lo, hi] fits, adding
   /// whole voxels on the sides that need them (the voxel size and the

@@ -135,6 +135,14 @@ struct SystemParams {
   /// detections of its class, as a lost object is, and moved onto the one
   /// it fits (reidentify_min_inliers). 0: off (the paper).
   double relocalize_below = 0.5;
+  /// Duplicates (docs/system.md, "Merging duplicates"): on a detector
+  /// frame, an object that a detection matched is one with a lost object
+  /// of its class that was lost before it was created, or with a live one
+  /// that no detection matched and whose box overlaps its own by
+  /// max_volume_iou, when at least this share of the detection's points lie
+  /// on that object's surface once aligned; the older id goes on with both
+  /// models fused. 0: off (the paper).
+  double merge_min_inliers = 0.6;
   /// An object created or re-identified on a detector frame is not deleted
   /// as not visible until it has been visible once or the detector runs
   /// again: one that enters the view across the image border would
@@ -213,6 +221,7 @@ struct SystemParams {
     detail::require(reidentify_min_inliers > 0 && reidentify_min_inliers <= 1, w,
                     "reidentify_min_inliers must be in (0, 1]");
     detail::require(relocalize_below >= 0 && relocalize_below <= 1, w, "relocalize_below must be in [0, 1]");
+    detail::require(merge_min_inliers >= 0 && merge_min_inliers <= 1, w, "merge_min_inliers must be in [0, 1]");
     detail::require(background_integration.max_weight > S(0) && object_integration.max_weight > S(0), w,
                     "max_weight must be positive");
   }

@@ -12,6 +12,8 @@
 //      foreground counts from the matched detections     (mapping.hpp)
 //   7. delete unlikely, invisible or weakly associated objects
 //                                                        (lifecycle.hpp)
+//   8. on detector frames: merge two models found to be one object
+//                                                        (merging.hpp)
 //
 // The state is a Map (map.hpp) and the frame's images a Frame (frame.hpp);
 // a user's own loop calls the same stages on its own Map and Frame
@@ -39,6 +41,7 @@
 #include "emfusion/slam/lifecycle.hpp"
 #include "emfusion/slam/map.hpp"
 #include "emfusion/slam/mapping.hpp"
+#include "emfusion/slam/merging.hpp"
 #include "emfusion/slam/params.hpp"
 #include "emfusion/slam/preprocessing.hpp"
 #include "emfusion/slam/rendering.hpp"
@@ -151,7 +154,13 @@ class System {
     // Objects deleted now were tracked in this frame: its pose is the last
     // of their trajectories.
     map_.record_poses(timestamp);
+    std::vector<int> ids_drawn;  // the objects the segmentation was rendered with
+    for (const auto& o : map_.objects) ids_drawn.push_back(o->id());
     delete_objects(map_, frame_, params_, result, det != nullptr, int(update.fresh.size()), !starts_map);
+    // Two models of one object (merge_min_inliers; 0 turns it off).
+    if (det)
+      result.merged = merge_objects(map_, frame_, *det, seg, update.object_of_detection, ids_drawn, camera_, params_,
+                                    parts_.object_norm, parts_.solver);
     // Deleted and resized (detector frames) object volumes are freed memory
     // the C library may keep; on the CPU that is resident memory.
     if constexpr (!B::is_device)
