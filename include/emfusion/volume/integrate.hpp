@@ -108,59 +108,73 @@ EMF_HD bool clip_column_to_frustum(const PinholeCamera<S>& camera, const Vec3<S>
   return z_begin < z_end;
 }
 
+/// The per-voxel update of eq. 10 with the refinements of IntegrationParams:
+/// what one measurement does to one voxel at camera-frame point p. Shared by
+/// the dense and the sparse volume (sparse_tsdf_volume.hpp), so that the two
+/// cannot drift apart.
+template <class S>
+struct VoxelUpdate {
+  ImageView<const S> depth;
+  ImageView<const S> weights;     // empty: weight 1
+  ImageView<const S> incidence;   // empty: cosine 1 (refinements off)
+  ImageView<const S> near_depth;  // empty: no silhouette guard
+  PinholeCamera<S> camera;
+  IntegrationParams<S> params;
+  S truncation;
+
+  template <class Store>
+  EMF_HD void operator()(const Vec3<S>& p, Store& voxel_sdf, Store& voxel_weight) const {
+    if (!(p.z() > S(0))) return;
+    const Vec2<S> uv = camera.project(p);
+    const int u = int(std::floor(uv.x() + S(0.5))), v = int(std::floor(uv.y() + S(0.5)));
+    if (!depth.contains(u, v)) return;
+    const S d = depth(u, v);
+    if (!is_valid_depth(d)) return;
+    const S trunc = truncation;
+    // Distance along the ray through the pixel, not along the optical axis.
+    const S ray_scale = std::sqrt(S(1) + (p.x() * p.x() + p.y() * p.y()) / (p.z() * p.z()));
+    S sdf = (d - p.z()) * ray_scale;
+    const S behind = params.behind_band * trunc;
+    if (sdf < -trunc) return;
+    const S c = incidence.empty() ? S(1) : incidence(u, v);
+    if (params.point_to_plane) sdf *= c;
+    if (sdf < -behind) return;
+    S w = weights.empty() ? S(1) : weights(u, v);
+    if (sdf >= trunc) {
+      // Beside a silhouette the voxel may belong to the nearer surface.
+      if (!near_depth.empty() && (near_depth(u, v) - p.z()) * ray_scale < trunc) return;
+      w = params.free_space_weight;
+    } else {
+      if (params.behind_surface_falloff && sdf < S(0)) w *= S(1) + sdf / behind;
+      if (params.weight_by_incidence) w *= c;
+    }
+    if (!(w > S(0))) return;
+    const S tsdf = sdf < trunc ? sdf : trunc;
+    const S w_old = S(voxel_weight);
+    const S w_sum = w_old + w;
+    voxel_sdf = Store((w_old * S(voxel_sdf) + w * tsdf) / w_sum);
+    voxel_weight = Store(w_sum < params.max_weight ? w_sum : params.max_weight);
+  }
+};
+
 /// Integrates one column of voxels (x, y, all z): consecutive z share the
 /// ray arithmetic, and neighbouring threads touch neighbouring voxels.
 template <class S, class Store>
 struct IntegrateColumn {
   TsdfView<S, Store> volume;
-  ImageView<const S> depth;
-  ImageView<const S> weights;    // empty: weight 1
-  ImageView<const S> incidence;   // empty: cosine 1 (refinements off)
-  ImageView<const S> near_depth;  // empty: no silhouette guard
-  PinholeCamera<S> camera;
+  VoxelUpdate<S> update;
   SE3<S> T_camera_volume;
-  IntegrationParams<S> params;
   S far;  ///< no voxel deeper than this (camera z) is updated
 
   EMF_HD void operator()(int column) const {
     const int x = column % volume.nx, y = column / volume.nx;
     const Vec3<S> start = T_camera_volume * volume.voxel_center(x, y, 0);
     const Vec3<S> step = T_camera_volume.rotate(vec3(S(0), S(0), volume.voxel_size));
-    const S trunc = volume.truncation;
     int z_begin = 0, z_end = volume.nz;
-    if (!clip_column_to_frustum(camera, start, step, far, z_begin, z_end)) return;
+    if (!clip_column_to_frustum(update.camera, start, step, far, z_begin, z_end)) return;
     for (int z = z_begin; z < z_end; ++z) {
-      const Vec3<S> p = start + S(z) * step;
-      if (!(p.z() > S(0))) continue;
-      const Vec2<S> uv = camera.project(p);
-      const int u = int(std::floor(uv.x() + S(0.5))), v = int(std::floor(uv.y() + S(0.5)));
-      if (!depth.contains(u, v)) continue;
-      const S d = depth(u, v);
-      if (!is_valid_depth(d)) continue;
-      // Distance along the ray through the pixel, not along the optical axis.
-      const S ray_scale = std::sqrt(S(1) + (p.x() * p.x() + p.y() * p.y()) / (p.z() * p.z()));
-      S sdf = (d - p.z()) * ray_scale;
-      const S behind = params.behind_band * trunc;
-      if (sdf < -trunc) continue;
-      const S c = incidence.empty() ? S(1) : incidence(u, v);
-      if (params.point_to_plane) sdf *= c;
-      if (sdf < -behind) continue;
-      S w = weights.empty() ? S(1) : weights(u, v);
-      if (sdf >= trunc) {
-        // Beside a silhouette the voxel may belong to the nearer surface.
-        if (!near_depth.empty() && (near_depth(u, v) - p.z()) * ray_scale < trunc) continue;
-        w = params.free_space_weight;
-      } else {
-        if (params.behind_surface_falloff && sdf < S(0)) w *= S(1) + sdf / behind;
-        if (params.weight_by_incidence) w *= c;
-      }
-      if (!(w > S(0))) continue;
-      const S tsdf = sdf < trunc ? sdf : trunc;
       const std::int64_t i = volume.index(x, y, z);
-      const S w_old = S(volume.weight[i]);
-      const S w_sum = w_old + w;
-      volume.sdf[i] = Store((w_old * S(volume.sdf[i]) + w * tsdf) / w_sum);
-      volume.weight[i] = Store(w_sum < params.max_weight ? w_sum : params.max_weight);
+      update(start + S(z) * step, volume.sdf[i], volume.weight[i]);
     }
   }
 };
@@ -272,15 +286,14 @@ struct IntegrationWorkspace {
   Image<S, B> incidence, rows, near_depth;
 };
 
-/// Fuses `depth` (metres, 0 = invalid), seen by `camera` at `T_world_camera`,
-/// into `volume`. `weights`, if non-empty, gives q(u) per pixel and must have
-/// the depth image's size. Runs on the volume's backend; the images must live
-/// there too. `workspace` (optional) keeps the derived images' memory.
-template <class S, Backend B, class Store>
-void integrate(TsdfVolume<S, B, Store>& volume, const Image<S, B>& depth, const PinholeCamera<S>& camera,
-               const SE3<S>& T_world_camera, const Image<S, B>* weights = nullptr,
-               const IntegrationParams<S>& params = {}, IntegrationWorkspace<S, B>* workspace = nullptr) {
-  constexpr const char* where = "integrate";
+namespace detail {
+/// Checks integrate()'s arguments, computes the per-pixel images the chosen
+/// refinements need (into `ws`) and returns the per-voxel update over them:
+/// the part of integration that does not depend on the volume's layout.
+template <class S, Backend B>
+VoxelUpdate<S> prepare_voxel_update(const Image<S, B>& depth, const PinholeCamera<S>& camera,
+                                    const Image<S, B>* weights, const IntegrationParams<S>& params, S voxel_size,
+                                    S truncation, const B& backend, IntegrationWorkspace<S, B>& ws, const char* where) {
   camera.validate(where);
   detail::require_image(depth.view(), camera.width, camera.height, where, "depth image");
   if (weights) detail::require_image(weights->view(), depth.width(), depth.height(), where, "weight image");
@@ -288,11 +301,9 @@ void integrate(TsdfVolume<S, B, Store>& volume, const Image<S, B>& depth, const 
                   "silhouette_guard must not be negative, got " + std::to_string(double(params.silhouette_guard)));
   detail::require(params.max_weight > S(0), where,
                   "max_weight must be positive, got " + std::to_string(double(params.max_weight)));
-  const B& backend = volume.backend();
-  IntegrationWorkspace<S, B> local;
-  IntegrationWorkspace<S, B>& ws = workspace ? *workspace : local;
   const auto sized = [&](Image<S, B>& image) -> Image<S, B>& {
-    if (!image.same_size(depth.width(), depth.height())) image = Image<S, B>(depth.width(), depth.height(), S(0), backend);
+    if (!image.same_size(depth.width(), depth.height()))
+      image = Image<S, B>(depth.width(), depth.height(), S(0), backend);
     return image;
   };
   ImageView<const S> incidence, near_depth;
@@ -305,21 +316,32 @@ void integrate(TsdfVolume<S, B, Store>& volume, const Image<S, B>& depth, const 
   if (params.silhouette_guard > S(0)) {
     Image<S, B>& rows = sized(ws.rows);
     Image<S, B>& near = sized(ws.near_depth);
-    const S lateral = params.silhouette_guard * volume.voxel_size() * std::max(camera.fx, camera.fy);
+    const S lateral = params.silhouette_guard * voxel_size * std::max(camera.fx, camera.fy);
     for_each_index(backend, depth.size(),
                    detail::NearestDepthPass<S>{depth.view(), depth.view(), rows.view(), lateral, 1, 0});
     for_each_index(backend, depth.size(),
                    detail::NearestDepthPass<S>{depth.view(), std::as_const(rows).view(), near.view(), lateral, 0, 1});
     near_depth = std::as_const(near).view();
   }
-  detail::IntegrateColumn<S, Store> f{volume.view(),
-                                      depth.view(),
-                                      weights ? weights->view() : ImageView<const S>{},
-                                      incidence,
-                                      near_depth,
-                                      camera,
-                                      T_world_camera.inverse() * volume.pose(),
-                                      params,
+  return VoxelUpdate<S>{
+      depth.view(), weights ? weights->view() : ImageView<const S>{}, incidence, near_depth, camera, params,
+      truncation};
+}
+}  // namespace detail
+
+/// Fuses `depth` (metres, 0 = invalid), seen by `camera` at `T_world_camera`,
+/// into `volume`. `weights`, if non-empty, gives q(u) per pixel and must have
+/// the depth image's size. Runs on the volume's backend; the images must live
+/// there too. `workspace` (optional) keeps the derived images' memory.
+template <class S, Backend B, class Store>
+void integrate(TsdfVolume<S, B, Store>& volume, const Image<S, B>& depth, const PinholeCamera<S>& camera,
+               const SE3<S>& T_world_camera, const Image<S, B>* weights = nullptr,
+               const IntegrationParams<S>& params = {}, IntegrationWorkspace<S, B>* workspace = nullptr) {
+  IntegrationWorkspace<S, B> local;
+  const detail::VoxelUpdate<S> update =
+      detail::prepare_voxel_update(depth, camera, weights, params, volume.voxel_size(), volume.truncation(),
+                                   volume.backend(), workspace ? *workspace : local, "integrate");
+  detail::IntegrateColumn<S, Store> f{volume.view(), update, T_world_camera.inverse() * volume.pose(),
                                       std::numeric_limits<S>::infinity()};
   // The far plane pays on the CPU, where voxels are visited one by one; on a
   // device the reduction's round trip costs more than the voxels it skips.

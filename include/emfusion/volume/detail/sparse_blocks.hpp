@@ -1,0 +1,99 @@
+// Voxel blocks of the sparse TSDF volume and the spatial hash table that finds
+// them: block keys (three signed block coordinates packed into one 64-bit
+// word), the hash, and lookup and insertion by linear probing on raw arrays,
+// callable in kernels on either backend.
+//
+// The table is open addressing over a power-of-two number of slots, at least
+// twice the volume's block capacity, so it is never more than half full and
+// every probe sequence reaches an empty slot. A slot holds a key (empty_key
+// when free) and the index of the block's voxels in the volume's storage.
+// Slots are claimed with an atomic compare-and-swap on the key; keys are
+// never removed (a reset empties the whole table), so a lookup may stop at
+// the first empty slot.
+#pragma once
+
+#include <cstdint>
+
+#include "emfusion/core/atomic.hpp"
+#include "emfusion/core/host_device.hpp"
+
+namespace emfusion::detail::sparse {
+
+using Key = unsigned long long;
+
+inline constexpr int block_side = 8;        ///< voxels along each axis of a block
+inline constexpr int block_shift = 3;       ///< log2(block_side)
+inline constexpr int block_voxels = 512;    ///< block_side^3
+inline constexpr int coordinate_bits = 21;  ///< per axis of a key
+/// Block coordinates lie in [-block_limit, block_limit) on each axis.
+inline constexpr int block_limit = 1 << (coordinate_bits - 1);
+/// Voxel coordinates lie in [-voxel_limit, voxel_limit) on each axis.
+inline constexpr int voxel_limit = block_limit * block_side;
+/// Marks a free slot: bit 63 is set, which no packed key has.
+inline constexpr Key empty_key = ~Key(0);
+
+EMF_HD inline bool block_in_range(int bx, int by, int bz) {
+  return bx >= -block_limit && by >= -block_limit && bz >= -block_limit && bx < block_limit && by < block_limit &&
+         bz < block_limit;
+}
+
+/// The key of block (bx, by, bz), which must be in range. Keys order blocks
+/// by x, then y, then z.
+EMF_HD inline Key pack_key(int bx, int by, int bz) {
+  const Key mask = (Key(1) << coordinate_bits) - 1;
+  return ((Key(bx + block_limit) & mask) << (2 * coordinate_bits)) |
+         ((Key(by + block_limit) & mask) << coordinate_bits) | (Key(bz + block_limit) & mask);
+}
+
+EMF_HD inline void unpack_key(Key key, int& bx, int& by, int& bz) {
+  const Key mask = (Key(1) << coordinate_bits) - 1;
+  bx = int((key >> (2 * coordinate_bits)) & mask) - block_limit;
+  by = int((key >> coordinate_bits) & mask) - block_limit;
+  bz = int(key & mask) - block_limit;
+}
+
+/// A 64-bit finaliser (the one of splitmix64): neighbouring blocks land in
+/// unrelated slots, so runs of occupied slots stay short.
+EMF_HD inline Key mix(Key x) {
+  x ^= x >> 30;
+  x *= 0xbf58476d1ce4e5b9ull;
+  x ^= x >> 27;
+  x *= 0x94d049bb133111ebull;
+  x ^= x >> 31;
+  return x;
+}
+
+/// The block index stored under `key`, or -1.
+EMF_HD inline int find_block(const Key* slot_keys, const int* slot_blocks, Key slot_mask, Key key) {
+  Key slot = mix(key) & slot_mask;
+  for (Key probe = 0; probe <= slot_mask; ++probe) {
+    const Key k = slot_keys[slot];
+    if (k == key) return slot_blocks[slot];
+    if (k == empty_key) return -1;
+    slot = (slot + 1) & slot_mask;
+  }
+  return -1;
+}
+
+/// Stores `key` -> `block` in the first free slot of its probe sequence; safe
+/// to call from many threads at once with distinct keys. False if the key was
+/// already there (its block index is then left as it was) or no slot is free.
+EMF_HD inline bool insert_block(Key* slot_keys, int* slot_blocks, Key slot_mask, Key key, int block) {
+  Key slot = mix(key) & slot_mask;
+  for (Key probe = 0; probe <= slot_mask; ++probe) {
+    const Key previous = atomic_compare_and_swap(&slot_keys[slot], empty_key, key);
+    if (previous == empty_key) {
+      // Nobody reads the slot before the insertion kernel has finished.
+      slot_blocks[slot] = block;
+      return true;
+    }
+    if (previous == key) return false;
+    slot = (slot + 1) & slot_mask;
+  }
+  return false;
+}
+
+/// Offset of voxel (lx, ly, lz) (0..7 each) inside its block: x fastest.
+EMF_HD inline int local_index(int lx, int ly, int lz) { return (lz * block_side + ly) * block_side + lx; }
+
+}  // namespace emfusion::detail::sparse

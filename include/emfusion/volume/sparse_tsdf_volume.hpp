@@ -1,0 +1,589 @@
+// Sparse truncated signed distance volume: the TSDF stored only in blocks of
+// 8^3 voxels near observed surfaces, found through a spatial hash table on the
+// backend, so that the map is unbounded and its memory follows the observed
+// surface instead of a cube. `SparseTsdfView` is what kernels capture; it
+// samples like `TsdfView` (tsdf_volume.hpp), trilinear across block borders.
+// `allocate_blocks` adds the blocks a depth frame's truncation band touches;
+// `integrate` allocates and then applies the dense volume's per-voxel update
+// (eq. 10, integrate.hpp) to every allocated voxel in view.
+//
+// Geometry and values are those of the dense volume: voxel (x, y, z) has its
+// centre at ((x + 1/2) s, (y + 1/2) s, (z + 1/2) s) in the volume frame, here
+// for any integer x, y, z in [-2^23, 2^23) (about +-84 km at 1 cm); SDF values
+// are metres clamped to [-truncation, truncation]; weight 0 means never
+// observed, and a voxel of a block that was never allocated reads as never
+// observed. Block (bx, by, bz) holds voxels 8 bx .. 8 bx + 7 (and so on).
+//
+// Memory: the hash table (12 bytes a slot, the next power of two at least
+// twice the block capacity) and the list of block keys are reserved at
+// construction; voxel storage grows with the allocated blocks (doubling, at
+// most to the capacity). When the capacity is reached, allocation refuses the
+// new blocks that do not fit and counts them; stored blocks are never moved
+// or dropped. docs/volumes.md has the details.
+#pragma once
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <limits>
+#include <string>
+#include <type_traits>
+#include <vector>
+
+#include <thrust/copy.h>
+#include <thrust/fill.h>
+#include <thrust/iterator/counting_iterator.h>
+#include <thrust/remove.h>
+#include <thrust/sort.h>
+#include <thrust/unique.h>
+
+#include "emfusion/core/backend.hpp"
+#include "emfusion/core/camera.hpp"
+#include "emfusion/core/error.hpp"
+#include "emfusion/core/host_device.hpp"
+#include "emfusion/core/image.hpp"
+#include "emfusion/core/math.hpp"
+#include "emfusion/core/parallel.hpp"
+#include "emfusion/core/se3.hpp"
+#include "emfusion/volume/detail/sparse_blocks.hpp"
+#include "emfusion/volume/detail/sparse_kernels.hpp"
+#include "emfusion/volume/integrate.hpp"
+
+namespace emfusion {
+
+/// Kernel-side view of a sparse TSDF volume: S is the compute scalar, Store
+/// the scalar the voxels are stored in. The hash table is read-only here;
+/// blocks are added by allocate_blocks / integrate on the volume.
+template <class S, class Store = S>
+struct SparseTsdfView {
+  static constexpr int block_side = detail::sparse::block_side;
+  static constexpr int block_voxels = detail::sparse::block_voxels;
+
+  Store* sdf = nullptr;     ///< block b's voxels at [b * 512, (b + 1) * 512), x fastest
+  Store* weight = nullptr;  ///< same layout
+  const unsigned long long* slot_keys = nullptr;
+  const int* slot_blocks = nullptr;
+  unsigned long long slot_mask = 0;                ///< table slots - 1
+  const unsigned long long* block_keys = nullptr;  ///< key of each allocated block
+  int blocks = 0;                                  ///< allocated blocks
+  S voxel_size = S(0);
+  S truncation = S(0);
+
+  /// A read-only view of the same volume (only for views of mutable voxels).
+  template <class U = Store>
+  requires(!std::is_const_v<U>) EMF_HD operator SparseTsdfView<S, const U>() const {
+    return {sdf, weight, slot_keys, slot_blocks, slot_mask, block_keys, blocks, voxel_size, truncation};
+  }
+
+  /// Index of block (bx, by, bz) in the voxel storage, or -1 if it is not
+  /// allocated (or outside the addressable range).
+  EMF_HD int find_block(int bx, int by, int bz) const {
+    if (!detail::sparse::block_in_range(bx, by, bz)) return -1;
+    return detail::sparse::find_block(slot_keys, slot_blocks, slot_mask, detail::sparse::pack_key(bx, by, bz));
+  }
+  /// Coordinates of allocated block b (0 <= b < blocks).
+  EMF_HD Vec3i block_coordinates(int b) const {
+    Vec3i c;
+    detail::sparse::unpack_key(block_keys[b], c[0], c[1], c[2]);
+    return c;
+  }
+  /// Storage index of voxel (x, y, z), or -1 if its block is not allocated.
+  EMF_HD std::int64_t voxel_index(int x, int y, int z) const {
+    const int b = find_block(x >> 3, y >> 3, z >> 3);
+    if (b < 0) return -1;
+    return std::int64_t(b) * block_voxels + detail::sparse::local_index(x & 7, y & 7, z & 7);
+  }
+  /// SDF and weight of voxel (x, y, z); truncation and 0 (never observed)
+  /// when its block is not allocated, and then false.
+  EMF_HD bool voxel(int x, int y, int z, S& sdf_out, S& weight_out) const {
+    const std::int64_t i = voxel_index(x, y, z);
+    sdf_out = i < 0 ? truncation : S(sdf[i]);
+    weight_out = i < 0 ? S(0) : S(weight[i]);
+    return i >= 0;
+  }
+
+  /// True if (x, y, z) is addressable (allocated or not).
+  EMF_HD bool contains_voxel(int x, int y, int z) const {
+    const int l = detail::sparse::voxel_limit;
+    return x >= -l && y >= -l && z >= -l && x < l && y < l && z < l;
+  }
+  /// Volume-frame position of a voxel centre.
+  EMF_HD Vec3<S> voxel_center(int x, int y, int z) const {
+    return vec3((S(x) + S(0.5)) * voxel_size, (S(y) + S(0.5)) * voxel_size, (S(z) + S(0.5)) * voxel_size);
+  }
+  /// True if the volume-frame point lies in the addressable range, with a
+  /// voxel to spare for interpolation (false for NaN). The sparse volume has
+  /// no box: whether anything was observed there is what sample() says.
+  EMF_HD bool contains_point(const Vec3<S>& p) const {
+    const S l = S(detail::sparse::voxel_limit - 2) * voxel_size;
+    return p.x() >= -l && p.y() >= -l && p.z() >= -l && p.x() < l && p.y() < l && p.z() < l;
+  }
+
+  /// Trilinear SDF at volume-frame point p. Returns false (and leaves the
+  /// outputs alone) if any of the eight voxels around p was never observed
+  /// (an unallocated block counts as never observed). `weight_out`, if
+  /// given, receives the interpolated weight.
+  EMF_HD bool sample(const Vec3<S>& p, S& sdf_out, S* weight_out = nullptr) const {
+    Corner c;
+    if (!corner(p, c)) return false;
+    S v[8], w[8];
+    if (!load(c, v, w)) return false;
+    sdf_out = interpolate(v, c);
+    if (weight_out) *weight_out = interpolate(w, c);
+    return true;
+  }
+
+  /// Trilinear SDF over the observed voxels of the eight around p, their
+  /// interpolation weights renormalised: true where those voxels carry at
+  /// least `min_coverage` of the weight (TsdfView::sample_observed).
+  EMF_HD bool sample_observed(const Vec3<S>& p, S& sdf_out, S min_coverage = S(0.5)) const {
+    Corner c;
+    if (!corner(p, c)) return false;
+    S v[8], w[8];
+    gather(c, v, w);
+    S sum = S(0), covered = S(0);
+    for (int k = 0; k < 8; ++k) {
+      if (!(w[k] > S(0))) continue;
+      const S a = ((k & 1) ? c.fx : S(1) - c.fx) * ((k & 2) ? c.fy : S(1) - c.fy) * ((k & 4) ? c.fz : S(1) - c.fz);
+      sum += a * v[k];
+      covered += a;
+    }
+    if (!(covered >= min_coverage) || !(covered > S(0))) return false;
+    sdf_out = sum / covered;
+    return true;
+  }
+
+  /// Central differences one voxel apart of `sample_observed`, one-sided
+  /// where one side is not observed (TsdfView::observed_gradient).
+  EMF_HD bool observed_gradient(const Vec3<S>& p, Vec3<S>& gradient) const {
+    S centre = S(0);
+    const bool has_centre = sample_observed(p, centre);
+    for (int a = 0; a < 3; ++a) {
+      Vec3<S> q = p;
+      S plus = S(0), minus = S(0);
+      q[a] = p[a] + voxel_size;
+      const bool has_plus = sample_observed(q, plus);
+      q[a] = p[a] - voxel_size;
+      const bool has_minus = sample_observed(q, minus);
+      if (has_plus && has_minus)
+        gradient[a] = (plus - minus) / (S(2) * voxel_size);
+      else if (has_plus && has_centre)
+        gradient[a] = (plus - centre) / voxel_size;
+      else if (has_minus && has_centre)
+        gradient[a] = (centre - minus) / voxel_size;
+      else
+        return false;
+    }
+    return true;
+  }
+
+  /// Trilinear SDF and its exact gradient (of the trilinear interpolant) at p.
+  EMF_HD bool sample_with_gradient(const Vec3<S>& p, S& sdf_out, Vec3<S>& gradient, S* weight_out = nullptr) const {
+    Corner c;
+    if (!corner(p, c)) return false;
+    S v[8], w[8];
+    if (!load(c, v, w)) return false;
+    sdf_out = interpolate(v, c);
+    if (weight_out) *weight_out = interpolate(w, c);
+    const S fx = c.fx, fy = c.fy, fz = c.fz;
+    // v index bits: 1 -> +x, 2 -> +y, 4 -> +z.
+    const S dx = ((v[1] - v[0]) * (1 - fy) + (v[3] - v[2]) * fy) * (1 - fz) +
+                 ((v[5] - v[4]) * (1 - fy) + (v[7] - v[6]) * fy) * fz;
+    const S dy = ((v[2] - v[0]) * (1 - fx) + (v[3] - v[1]) * fx) * (1 - fz) +
+                 ((v[6] - v[4]) * (1 - fx) + (v[7] - v[5]) * fx) * fz;
+    const S dz = ((v[4] - v[0]) * (1 - fx) + (v[5] - v[1]) * fx) * (1 - fy) +
+                 ((v[6] - v[2]) * (1 - fx) + (v[7] - v[3]) * fx) * fy;
+    gradient = vec3(dx, dy, dz) / voxel_size;
+    return true;
+  }
+
+  /// SDF gradient by central differences of trilinear samples one voxel
+  /// apart (TsdfView::central_gradient).
+  EMF_HD bool central_gradient(const Vec3<S>& p, Vec3<S>& gradient) const {
+    S plus, minus;
+    for (int a = 0; a < 3; ++a) {
+      Vec3<S> q = p;
+      q[a] += voxel_size;
+      if (!sample(q, plus)) return false;
+      q[a] -= S(2) * voxel_size;
+      if (!sample(q, minus)) return false;
+      gradient[a] = (plus - minus) / (S(2) * voxel_size);
+    }
+    return true;
+  }
+
+ private:
+  struct Corner {
+    int x, y, z;
+    S fx, fy, fz;
+  };
+  EMF_HD bool corner(const Vec3<S>& p, Corner& c) const {
+    const S gx = p.x() / voxel_size - S(0.5), gy = p.y() / voxel_size - S(0.5), gz = p.z() / voxel_size - S(0.5);
+    // Written so that NaN coordinates fail the test.
+    const S l = S(detail::sparse::voxel_limit - 2);
+    if (!(gx >= -l && gy >= -l && gz >= -l && gx < l && gy < l && gz < l)) return false;
+    c.x = int(std::floor(gx)), c.y = int(std::floor(gy)), c.z = int(std::floor(gz));
+    c.fx = gx - S(c.x), c.fy = gy - S(c.y), c.fz = gz - S(c.z);
+    return true;
+  }
+  /// The eight voxels around corner c (index bits: 1 -> +x, 2 -> +y, 4 ->
+  /// +z), weight 0 where a block is not allocated. They span one block
+  /// unless c lies on a block's last layer; each block is looked up once.
+  EMF_HD void gather(const Corner& c, S* v, S* w) const {
+    const int bx = c.x >> 3, by = c.y >> 3, bz = c.z >> 3;
+    const int lx = c.x & 7, ly = c.y & 7, lz = c.z & 7;
+    int found[8];  // by block offset (bits: 1 -> +x, 2 -> +y, 4 -> +z); -2 = not looked up
+    for (int o = 0; o < 8; ++o) found[o] = -2;
+    for (int k = 0; k < 8; ++k) {
+      const int x = lx + (k & 1), y = ly + ((k >> 1) & 1), z = lz + ((k >> 2) & 1);
+      const int o = (x >> 3) | ((y >> 3) << 1) | ((z >> 3) << 2);
+      if (found[o] == -2) found[o] = find_block(bx + (x >> 3), by + (y >> 3), bz + (z >> 3));
+      if (found[o] < 0) {
+        v[k] = truncation;
+        w[k] = S(0);
+        continue;
+      }
+      const std::int64_t i = std::int64_t(found[o]) * block_voxels + detail::sparse::local_index(x & 7, y & 7, z & 7);
+      v[k] = S(sdf[i]);
+      w[k] = S(weight[i]);
+    }
+  }
+  EMF_HD bool load(const Corner& c, S* v, S* w) const {
+    gather(c, v, w);
+    for (int k = 0; k < 8; ++k)
+      if (!(w[k] > S(0))) return false;
+    return true;
+  }
+  EMF_HD static S interpolate(const S* v, const Corner& c) {
+    const S x00 = v[0] + (v[1] - v[0]) * c.fx, x10 = v[2] + (v[3] - v[2]) * c.fx;
+    const S x01 = v[4] + (v[5] - v[4]) * c.fx, x11 = v[6] + (v[7] - v[6]) * c.fx;
+    const S y0 = x00 + (x10 - x00) * c.fy, y1 = x01 + (x11 - x01) * c.fy;
+    return y0 + (y1 - y0) * c.fz;
+  }
+};
+
+static_assert(std::is_trivially_copyable_v<SparseTsdfView<float>>);
+static_assert(std::is_trivially_copyable_v<SparseTsdfView<double, const double>>);
+
+/// Parameters of a sparse volume.
+template <class S>
+struct SparseVolumeParams {
+  S voxel_size = S(0);      ///< metres
+  S truncation = S(0);      ///< metres; 0 selects 10 voxels
+  SE3<S> T_world_volume{};  ///< the volume frame (corner of voxel (0, 0, 0)) in the world
+  /// Most blocks of 8^3 voxels the volume holds: its memory bound
+  /// (SparseTsdfVolume::memory_bound_bytes).
+  int block_capacity = 0;
+};
+
+/// What one allocation did. `touched` counts the distinct blocks the frame's
+/// truncation band touches, stored or not; of those not stored before,
+/// `inserted` were added and `refused` did not fit (capacity reached).
+struct BlockAllocation {
+  std::int64_t touched = 0;
+  std::int64_t inserted = 0;
+  std::int64_t refused = 0;
+};
+
+/// A sparse TSDF volume on backend B with compute scalar S and storage scalar
+/// Store.
+template <class S, Backend B = Host, class Store = S>
+class SparseTsdfVolume {
+ public:
+  using Scalar = S;
+  using backend_type = B;
+  using View = SparseTsdfView<S, Store>;
+  using ConstView = SparseTsdfView<S, const Store>;
+  using Key = detail::sparse::Key;
+  static constexpr int block_side = detail::sparse::block_side;
+  static constexpr int block_voxels = detail::sparse::block_voxels;
+  /// The largest block capacity accepted (2^26 blocks: 2^35 voxels).
+  static constexpr int max_block_capacity = 1 << 26;
+
+  explicit SparseTsdfVolume(const SparseVolumeParams<S>& params, B backend = B{}) : backend_(backend) {
+    constexpr const char* where = "SparseTsdfVolume";
+    detail::require(std::isfinite(double(params.voxel_size)) && params.voxel_size > S(0), where,
+                    "voxel size must be positive and finite, got " + std::to_string(double(params.voxel_size)));
+    detail::require(std::isfinite(double(params.truncation)) && params.truncation >= S(0), where,
+                    "truncation must be finite and not negative (0 selects 10 voxels), got " +
+                        std::to_string(double(params.truncation)));
+    detail::require(params.block_capacity >= 1 && params.block_capacity <= max_block_capacity, where,
+                    "block capacity must be between 1 and " + std::to_string(max_block_capacity) + " blocks, got " +
+                        std::to_string(params.block_capacity));
+    params_ = params;
+    if (params_.truncation == S(0)) params_.truncation = S(10) * params.voxel_size;
+    std::size_t slots = 2;
+    while (slots < 2 * std::size_t(params.block_capacity)) slots *= 2;
+    slot_keys_.resize(slots);
+    slot_blocks_.resize(slots);
+    block_keys_.resize(std::size_t(params.block_capacity));
+    reset();
+  }
+  /// The same from the parameters one by one.
+  SparseTsdfVolume(S voxel_size, S truncation, const SE3<S>& T_world_volume, int block_capacity, B backend = B{})
+      : SparseTsdfVolume(SparseVolumeParams<S>{voxel_size, truncation, T_world_volume, block_capacity}, backend) {}
+
+  /// Forgets everything: no block allocated. The voxel storage grown so far
+  /// stays reserved (reset to SDF = truncation, weight = 0) for reuse.
+  void reset() {
+    thrust::fill(backend_.policy(), slot_keys_.begin(), slot_keys_.end(), detail::sparse::empty_key);
+    thrust::fill(backend_.policy(), slot_blocks_.begin(), slot_blocks_.end(), -1);
+    thrust::fill(backend_.policy(), sdf_.begin(), sdf_.end(), Store(params_.truncation));
+    thrust::fill(backend_.policy(), weight_.begin(), weight_.end(), Store(0));
+    allocated_ = 0;
+  }
+
+  const SparseVolumeParams<S>& params() const { return params_; }
+  S voxel_size() const { return params_.voxel_size; }
+  S truncation() const { return params_.truncation; }
+  /// Side of a block in metres.
+  S block_size() const { return S(block_side) * params_.voxel_size; }
+  const SE3<S>& pose() const { return params_.T_world_volume; }
+  void set_pose(const SE3<S>& T_world_volume) { params_.T_world_volume = T_world_volume; }
+  const B& backend() const { return backend_; }
+  /// Most blocks the volume holds.
+  int capacity() const { return params_.block_capacity; }
+  int allocated_blocks() const { return allocated_; }
+  /// Voxels in allocated blocks.
+  std::int64_t voxel_count() const { return std::int64_t(allocated_) * block_voxels; }
+  /// Bytes reserved now: the hash table, the block keys and the voxel
+  /// storage grown so far.
+  std::size_t memory_bytes() const { return table_bytes() + 2 * sdf_.size() * sizeof(Store); }
+  /// Bytes the volume reserves when every block of its capacity is in use.
+  std::size_t memory_bound_bytes() const {
+    return table_bytes() + 2 * std::size_t(params_.block_capacity) * block_voxels * sizeof(Store);
+  }
+
+  View view() { return make_view<View>(raw(sdf_), raw(weight_)); }
+  ConstView view() const { return make_view<ConstView>(raw(sdf_), raw(weight_)); }
+
+  /// Coordinates of the allocated blocks, in storage order (block b's voxels
+  /// are b * 512 .. b * 512 + 511 of sdf_to_host()), synchronising first.
+  std::vector<Vec3i> blocks_to_host() const {
+    const std::vector<Key> keys = copy_to_host(block_keys_, std::size_t(allocated_));
+    std::vector<Vec3i> out(keys.size());
+    for (std::size_t b = 0; b < keys.size(); ++b) detail::sparse::unpack_key(keys[b], out[b][0], out[b][1], out[b][2]);
+    return out;
+  }
+  /// SDF values and weights of the allocated blocks as host vectors, 512 per
+  /// block in the order of blocks_to_host(), x fastest within a block.
+  std::vector<Store> sdf_to_host() const { return copy_to_host(sdf_, std::size_t(allocated_) * block_voxels); }
+  std::vector<Store> weight_to_host() const { return copy_to_host(weight_, std::size_t(allocated_) * block_voxels); }
+
+  /// A copy of this volume on another backend (the same blocks at the same
+  /// storage indices; the voxel storage sized to the allocated blocks).
+  template <Backend B2>
+  SparseTsdfVolume<S, B2, Store> to(B2 backend = B2{}) const {
+    backend_.synchronize();
+    SparseTsdfVolume<S, B2, Store> out(params_, backend);
+    thrust::copy(slot_keys_.begin(), slot_keys_.end(), out.slot_keys_.begin());
+    thrust::copy(slot_blocks_.begin(), slot_blocks_.end(), out.slot_blocks_.begin());
+    thrust::copy(block_keys_.begin(), block_keys_.end(), out.block_keys_.begin());
+    out.grow_storage(allocated_);
+    const auto voxels = std::ptrdiff_t(allocated_) * block_voxels;
+    thrust::copy(sdf_.begin(), sdf_.begin() + voxels, out.sdf_.begin());
+    thrust::copy(weight_.begin(), weight_.begin() + voxels, out.weight_.begin());
+    out.allocated_ = allocated_;
+    return out;
+  }
+
+  /// Allocates the blocks of keys[0, count) (detail::sparse::pack_key; on the
+  /// volume's backend) that are not stored yet, in parallel: sorts and
+  /// de-duplicates the keys in place, drops those already stored, and inserts
+  /// the rest, as many as the capacity allows. The ones refused are the
+  /// largest keys (the order of the sort), so the outcome does not depend on
+  /// thread timing. allocate_blocks() calls it with a depth frame's keys.
+  BlockAllocation allocate_keys(typename B::template Vector<Key>& keys, std::size_t count) {
+    detail::require(count <= keys.size(), "SparseTsdfVolume::allocate_keys",
+                    "count " + std::to_string(count) + " exceeds the " + std::to_string(keys.size()) + " keys given");
+    BlockAllocation result;
+    if (count == 0) return result;
+    const auto policy = backend_.policy();
+    const auto begin = keys.begin(), end = keys.begin() + std::ptrdiff_t(count);
+    thrust::sort(policy, begin, end);
+    const auto unique_end = thrust::unique(policy, begin, end);
+    result.touched = unique_end - begin;
+    const auto new_end =
+        thrust::remove_if(policy, begin, unique_end,
+                          detail::sparse::IsStored{raw(slot_keys_), raw(slot_blocks_), Key(slot_keys_.size() - 1)});
+    const std::int64_t fresh = new_end - begin;
+    const std::int64_t room = std::int64_t(params_.block_capacity) - allocated_;
+    const int inserted = int(std::min(fresh, room));
+    result.inserted = inserted;
+    result.refused = fresh - inserted;
+    if (inserted == 0) return result;
+    grow_storage(allocated_ + inserted);
+    for_each_index(
+        backend_, inserted,
+        detail::sparse::InsertBlock{thrust::raw_pointer_cast(keys.data()), raw(slot_keys_), raw(slot_blocks_),
+                                    Key(slot_keys_.size() - 1), raw(block_keys_), allocated_});
+    allocated_ += inserted;
+    return result;
+  }
+
+ private:
+  template <class, Backend, class>
+  friend class SparseTsdfVolume;
+
+  std::size_t table_bytes() const {
+    return slot_keys_.size() * (sizeof(Key) + sizeof(int)) + block_keys_.size() * sizeof(Key);
+  }
+  /// Makes the voxel storage hold at least `blocks` blocks: doubling, capped
+  /// at the capacity, reallocated to the exact size (a vector's own growth
+  /// could overshoot the memory bound). New voxels are never observed.
+  void grow_storage(int blocks) {
+    const std::size_t stored = sdf_.size() / block_voxels;
+    if (std::size_t(blocks) <= stored) return;
+    const std::size_t doubled = std::max<std::size_t>(2 * stored, 64);
+    const std::size_t target =
+        std::max<std::size_t>(std::size_t(blocks), std::min<std::size_t>(doubled, std::size_t(params_.block_capacity)));
+    backend_.synchronize();
+    grow(sdf_, target * block_voxels, Store(params_.truncation));
+    grow(weight_, target * block_voxels, Store(0));
+  }
+  template <class Vec>
+  static void grow(Vec& v, std::size_t size, const Store& fill) {
+    Vec grown(size, fill);
+    thrust::copy(v.begin(), v.end(), grown.begin());
+    v.swap(grown);
+  }
+
+  template <class V, class P>
+  V make_view(P* sdf, P* weight) const {
+    V v;
+    v.sdf = sdf, v.weight = weight;
+    v.slot_keys = raw(slot_keys_), v.slot_blocks = raw(slot_blocks_);
+    v.slot_mask = Key(slot_keys_.size() - 1);
+    v.block_keys = raw(block_keys_), v.blocks = allocated_;
+    v.voxel_size = params_.voxel_size, v.truncation = params_.truncation;
+    return v;
+  }
+  // No pointer into an empty vector: thrust forms it by dereferencing null.
+  template <class Vec>
+  static auto* raw(Vec& v) {
+    return v.empty() ? nullptr : thrust::raw_pointer_cast(v.data());
+  }
+  template <class Vec>
+  std::vector<typename Vec::value_type> copy_to_host(const Vec& v, std::size_t count) const {
+    backend_.synchronize();
+    std::vector<typename Vec::value_type> out(count);
+    thrust::copy(v.begin(), v.begin() + std::ptrdiff_t(count), out.begin());
+    return out;
+  }
+
+  SparseVolumeParams<S> params_;
+  B backend_;
+  typename B::template Vector<Key> slot_keys_;    // hash table: key per slot (empty_key = free)
+  typename B::template Vector<int> slot_blocks_;  // hash table: block index per slot
+  typename B::template Vector<Key> block_keys_;   // key of block b (capacity entries)
+  typename B::template Vector<Store> sdf_;        // voxel storage, 512 per block
+  typename B::template Vector<Store> weight_;
+  int allocated_ = 0;
+};
+
+/// Scratch memory of sparse allocation and integration; pass one to reuse it
+/// across frames instead of allocating it every call.
+template <class S, Backend B>
+struct SparseIntegrationWorkspace {
+  IntegrationWorkspace<S, B> images;                     ///< integrate()'s derived images
+  typename B::template Vector<unsigned long long> keys;  ///< block keys of the band
+  typename B::template Vector<int> blocks;               ///< blocks in view
+};
+
+/// Allocates the blocks the truncation band of `depth` touches (metres, 0 =
+/// invalid), seen by `camera` at `T_world_camera`: for every valid pixel, the
+/// blocks along its ray from d - truncation to d + truncation, sampled at
+/// most half a block apart (up to 32 samples, further apart only for
+/// truncations over 7.75 blocks). With `weights`, only pixels of positive
+/// weight allocate (the rest would not change a voxel near their surface).
+/// In parallel on the volume's backend: keys per pixel, sort and unique,
+/// then insertion with compare-and-swap (SparseTsdfVolume::allocate_keys).
+template <class S, Backend B, class Store>
+BlockAllocation allocate_blocks(SparseTsdfVolume<S, B, Store>& volume, const Image<S, B>& depth,
+                                const PinholeCamera<S>& camera, const SE3<S>& T_world_camera,
+                                const Image<S, B>* weights = nullptr,
+                                SparseIntegrationWorkspace<S, B>* workspace = nullptr) {
+  constexpr const char* where = "allocate_blocks";
+  camera.validate(where);
+  detail::require_image(depth.view(), camera.width, camera.height, where, "depth image");
+  if (weights) detail::require_image(weights->view(), depth.width(), depth.height(), where, "weight image");
+  SparseIntegrationWorkspace<S, B> local;
+  auto& keys = (workspace ? *workspace : local).keys;
+  const S trunc = volume.truncation(), block = volume.block_size();
+  // Samples at most half a block apart over the band of 2 truncations.
+  const int samples = std::clamp(int(std::ceil(S(4) * trunc / block)) + 1, 2, detail::sparse::max_band_samples);
+  const std::size_t slots = std::size_t(depth.size()) * std::size_t(samples);
+  if (keys.size() < slots) keys.resize(slots);
+  const detail::sparse::BandBlockKeys<S> f{depth.view(), weights ? weights->view() : ImageView<const S>{},
+                                           camera,       volume.pose().inverse() * T_world_camera,
+                                           trunc,        block,
+                                           samples,      thrust::raw_pointer_cast(keys.data())};
+  std::size_t count = 0;
+  if constexpr (B::is_device) {
+    for_each_index(volume.backend(), depth.size(), f);
+    const auto end = thrust::remove_if(volume.backend().policy(), keys.begin(), keys.begin() + std::ptrdiff_t(slots),
+                                       detail::sparse::IsEmptyKey{});
+    count = std::size_t(end - keys.begin());
+  } else {
+    // Chunks of rows; then each chunk's keys moved to follow the previous.
+    const int chunks = std::min(depth.height(), 64);
+    std::vector<std::int64_t> counts(std::size_t(chunks), 0);
+    for_each_index(volume.backend(), chunks, detail::sparse::BandBlockKeyRows<S>{f, chunks, counts.data()});
+    unsigned long long* data = thrust::raw_pointer_cast(keys.data());
+    for (int c = 0; c < chunks; ++c) {
+      const std::int64_t first = std::int64_t(c) * depth.height() / chunks * depth.width() * samples;
+      std::copy(data + first, data + first + counts[std::size_t(c)], data + count);
+      count += std::size_t(counts[std::size_t(c)]);
+    }
+  }
+  return volume.allocate_keys(keys, count);
+}
+
+/// What integrate() did to a sparse volume.
+struct SparseIntegration {
+  BlockAllocation allocation;
+  std::int64_t blocks_in_view = 0;  ///< allocated blocks whose voxels were visited
+};
+
+/// Fuses `depth` into a sparse volume: allocates the blocks of its truncation
+/// band (allocate_blocks, the pixels of positive weight when `weights` is
+/// given), then applies the dense volume's per-voxel update (eq. 10 with
+/// `params`, integrate.hpp) to every voxel of every allocated block in view,
+/// so that a voxel, once allocated, evolves exactly as the dense volume's
+/// voxel at the same place. Space outside allocated blocks is not carved:
+/// it stays never observed.
+template <class S, Backend B, class Store>
+SparseIntegration integrate(SparseTsdfVolume<S, B, Store>& volume, const Image<S, B>& depth,
+                            const PinholeCamera<S>& camera, const SE3<S>& T_world_camera,
+                            const Image<S, B>* weights = nullptr, const IntegrationParams<S>& params = {},
+                            SparseIntegrationWorkspace<S, B>* workspace = nullptr) {
+  SparseIntegrationWorkspace<S, B> local;
+  SparseIntegrationWorkspace<S, B>& ws = workspace ? *workspace : local;
+  const B& backend = volume.backend();
+  const detail::VoxelUpdate<S> update = detail::prepare_voxel_update(
+      depth, camera, weights, params, volume.voxel_size(), volume.truncation(), backend, ws.images, "integrate");
+  SparseIntegration result;
+  result.allocation = allocate_blocks(volume, depth, camera, T_world_camera, weights, &ws);
+  const SE3<S> T_camera_volume = T_world_camera.inverse() * volume.pose();
+  S far = std::numeric_limits<S>::infinity();
+  // As for the dense volume: the far plane pays on the CPU only.
+  if constexpr (!B::is_device) {
+    far = max_valid_depth(depth) + volume.truncation();
+    if (!(far > volume.truncation())) return result;  // no measurement at all
+  }
+  const int allocated = volume.allocated_blocks();
+  if (allocated == 0) return result;
+  if (ws.blocks.size() < std::size_t(allocated)) ws.blocks.resize(std::size_t(allocated));
+  const auto view = volume.view();
+  const auto in_view_end = thrust::copy_if(
+      backend.policy(), thrust::counting_iterator<int>(0), thrust::counting_iterator<int>(allocated), ws.blocks.begin(),
+      detail::sparse::BlockInView<S>{view.block_keys, camera, T_camera_volume, volume.block_size(), far});
+  result.blocks_in_view = in_view_end - ws.blocks.begin();
+  using Column =
+      detail::sparse::IntegrateBlockColumn<S, typename SparseTsdfVolume<S, B, Store>::View, detail::VoxelUpdate<S>>;
+  for_each_index(backend, result.blocks_in_view * std::int64_t(detail::sparse::block_side * detail::sparse::block_side),
+                 Column{view, thrust::raw_pointer_cast(ws.blocks.data()), update, T_camera_volume});
+  return result;
+}
+
+}  // namespace emfusion
