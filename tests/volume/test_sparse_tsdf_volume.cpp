@@ -17,12 +17,21 @@
 #include "emfusion/volume/integrate.hpp"
 #include "emfusion/volume/sparse_tsdf_volume.hpp"
 #include "emfusion/volume/tsdf_volume.hpp"
+#include "emfusion/volume/volume_view.hpp"
 #include "support/catch.hpp"
 #include "support/configs.hpp"
 #include "support/fusion.hpp"
 #include "support/room.hpp"
 
 using namespace emfusion;
+
+// Both volumes, and their views, are what algorithms written once over the
+// volume concept (volume/volume_view.hpp) take.
+static_assert(TsdfSampler<TsdfView<float, const float>, float> && TsdfSampler<TsdfView<float, const Half>, float>);
+static_assert(TsdfSampler<SparseTsdfView<float, const float>, float>);
+static_assert(TsdfSampler<SparseTsdfView<double, const double>, double>);
+static_assert(TsdfVolumeType<TsdfVolume<double, Host>, double> && TsdfVolumeType<SparseTsdfVolume<float, Host>, float>);
+static_assert(!TsdfSampler<Vec3<float>, float>);
 
 namespace {
 
