@@ -10,8 +10,9 @@
 //   emfusion mesh <checkpoint> --output <dir>
 //
 // <input> is, by what is on disk (docs/io.md, "Inputs of the emfusion app"):
-//   synthetic:<scene>   a built-in scene (room, room-small, room1, room8; no
-//                       data needed), with ground truth and a simulated detector;
+//   synthetic:<scene>   a built-in scene (room, room-small, room1, room8,
+//                       corridor, corridor-small; no data needed), with
+//                       ground truth and a simulated detector;
 //   <file>.klg          an ElasticFusion/Co-Fusion log; camera from
 //                       --calibration, --intrinsics or the "default" preset,
 //                       depth value per metre from --depth-scale (default 1000);
@@ -129,7 +130,15 @@ std::optional<sim::DynamicSceneParams> synthetic_params(const std::string& input
     p.moving_objects = name == "room1" ? 1 : 8;
     return p;
   }
-  throw std::invalid_argument("unknown synthetic scene '" + name + "' (room, room-small, room1, room8)");
+  if (name == "corridor" || name == "corridor-small") {  // an 11 m walk with four moving objects
+    p.layout = sim::SceneLayout::corridor;
+    p.frames = 600;
+    p.moving_objects = 4;
+    if (name == "corridor-small") p.width = 320, p.height = 240;
+    return p;
+  }
+  throw std::invalid_argument("unknown synthetic scene '" + name +
+                              "' (room, room-small, room1, room8, corridor, corridor-small)");
 }
 
 /// The kinds of input `run` reads.
@@ -710,7 +719,7 @@ void mesh(const std::string& checkpoint, const std::string& output) {
 void evaluate(const std::string& sequence, const std::string& output) {
   GroundTruth gt;
   if (const auto params = synthetic_params(sequence)) {
-    const auto scene = sim::make_dynamic_room<float>(*params);
+    const auto scene = sim::make_dynamic_scene<float>(*params);
     gt.camera = scene.camera_trajectory();
     for (int k = 0; k < scene.object_count(); ++k) gt.objects[scene.object_name(k)] = scene.object_trajectory(k);
   } else {

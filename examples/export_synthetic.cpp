@@ -30,8 +30,8 @@ int main(int argc, char** argv) {
     const auto scene = examples::camera_scene(positional[0]);
     if (!scene)
       throw std::invalid_argument("'" + positional[0] +
-                                  "' is not a built-in scene: expected synthetic:<scene> (long, long-slow, long-small)");
-    const sim::DynamicScene<float> room = sim::make_dynamic_room<float>(scene->params);
+                                  "' is not a built-in scene: expected synthetic:<scene> (long, corridor, long-slow, long-small)");
+    const sim::DynamicScene<float> room = sim::make_dynamic_scene<float>(scene->params);
     const int frames = max_frames > 0 && max_frames < room.frame_count() ? max_frames : room.frame_count();
     examples::export_tum_sequence(room, positional[0], frames, positional[1]);
     fmt::print("wrote {} frames of {} to {}\n", frames, positional[0], positional[1]);

@@ -57,8 +57,13 @@ inline std::vector<CameraScene> camera_scenes() {
   sim::DynamicSceneParams small = longp;
   small.frames = 300, small.width = 320, small.height = 240;
   small.seed = 5;  // two fast segments within its 10 s (seed 1 has one)
+  sim::DynamicSceneParams corridor;
+  corridor.layout = sim::SceneLayout::corridor;
+  corridor.frames = 600;
+  corridor.moving_objects = 0;
   return {
       {"long", "900 frames, 640x480, static room, Kinect noise, fast segments", longp},
+      {"corridor", "600 frames, 640x480, a static corridor walked 11 m along, Kinect noise", corridor},
       {"long-slow", "900 frames, 640x480, static room, Kinect noise, slow hand-held path", slow},
       {"long-small", "300 frames, 320x240, static room, Kinect noise, two fast segments", small},
   };

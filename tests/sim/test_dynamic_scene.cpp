@@ -656,3 +656,62 @@ TEST_CASE("The simulated detector's masks, misses and false positives", "[sim]")
   sim::SimulatedDetector<float> other(scene, params);
   CHECK(other.detect(6, 0)->labels.to_host() != detector.detect(6, 0)->labels.to_host());
 }
+
+TEST_CASE("The corridor: an 11 m walk no 5 m volume holds, objects that move while the camera passes", "[sim]") {
+  sim::DynamicSceneParams p;
+  p.layout = sim::SceneLayout::corridor;
+  p.frames = 600;
+  p.moving_objects = 6;
+  p.width = 80, p.height = 60;
+  const auto scene = sim::make_dynamic_scene<double>(p);
+  REQUIRE(scene.object_count() == 6);
+  const Trajectory camera = scene.camera_trajectory();
+  double walked = 0, fastest = 0;
+  for (std::size_t i = 1; i < camera.size(); ++i) {
+    const double step = norm(camera[i].pose.translation() - camera[i - 1].pose.translation());
+    walked += step;
+    fastest = std::max(fastest, step * 30);
+  }
+  CHECK(walked > 10.0);
+  CHECK(norm(camera.back().pose.translation() - camera.front().pose.translation()) > 10.0);
+  CHECK(fastest < 0.8);  // a walk, not a jump
+  // Every object moves, never into another, and is seen while it moves.
+  Image<double, Host> depth;
+  Image<int, Host> labels;
+  std::vector<int> seen_moving(6, 0);
+  for (int k = 0; k < 6; ++k) {
+    const Trajectory a = scene.object_trajectory(k);
+    double moved = 0;
+    for (std::size_t i = 1; i < a.size(); ++i) moved += norm(a[i].pose.translation() - a[i - 1].pose.translation());
+    INFO(scene.object_name(k));
+    CHECK(moved > 0.1);
+    for (int j = k + 1; j < 6; ++j) {
+      const Trajectory b = scene.object_trajectory(j);
+      for (std::size_t i = 0; i < a.size(); i += 10)
+        CHECK(norm(a[i].pose.translation() - b[i].pose.translation()) > scene.object_radius(k) + scene.object_radius(j));
+    }
+  }
+  for (int f = 1; f < p.frames; f += 5) {
+    scene.render(f, depth, &labels, false);
+    const std::vector<int> l = labels.to_host();
+    for (int k = 0; k < 6; ++k) {
+      const Trajectory a = scene.object_trajectory(k);
+      const bool moving = norm(a[std::size_t(f)].pose.translation() - a[std::size_t(f) - 1].pose.translation()) > 1e-6;
+      if (moving && std::count(l.begin(), l.end(), k + 1) > 20) ++seen_moving[std::size_t(k)];
+    }
+  }
+  for (int k = 0; k < 6; ++k) {
+    INFO(scene.object_name(k));
+    CHECK(seen_moving[std::size_t(k)] >= 3);
+  }
+  // The objects are the table kinds, and the layout picks the generator.
+  CHECK(scene.object_name(1) == "cup_2");
+  p.moving_objects = 7;
+  CHECK_THROWS_WITH(sim::make_dynamic_scene<float>(p), EMF_CONTAINS("make_dynamic_corridor: moving_objects must be in 0..6, got 7"));
+  p.moving_objects = 2;
+  p.frames = 0;
+  CHECK_THROWS_WITH(sim::make_dynamic_corridor<float>(p), EMF_CONTAINS("frames must be >= 1, got 0"));
+  p.frames = 10;
+  p.layout = sim::SceneLayout(7);
+  CHECK_THROWS_WITH(sim::make_dynamic_scene<float>(p), EMF_CONTAINS("layout must be room or corridor, got 7"));
+}

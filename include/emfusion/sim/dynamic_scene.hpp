@@ -4,7 +4,8 @@
 // benchmarks and demos: every pose and every visible-instance label is known.
 //
 // `DynamicScene` holds a scene (shapes, per-frame poses, camera, noise model)
-// and renders it; `make_dynamic_room` generates one from a few parameters;
+// and renders it; `make_dynamic_room` (a room) and `make_dynamic_corridor`
+// (a corridor 15 m long) generate one from a few parameters;
 // `SyntheticSequence` adapts a scene to the FrameSource concept.
 #pragma once
 
@@ -346,14 +347,27 @@ enum class CameraPath {
   hand_held_fast,
 };
 
-/// What make_dynamic_room builds.
+/// The static world of a dynamic scene.
+enum class SceneLayout {
+  /// A 5 x 4 x 3 m room with a table and furniture; the camera sweeps in
+  /// front of the table (make_dynamic_room).
+  room,
+  /// A corridor 15 m long with three tables and furniture along one wall;
+  /// the camera walks 11 m along it looking at the wall, and objects on the
+  /// tables move while it passes (make_dynamic_corridor): a world larger
+  /// than a 5 m volume holds.
+  corridor,
+};
+
+/// What make_dynamic_room and make_dynamic_corridor build (make_dynamic_scene picks by `layout`).
 struct DynamicSceneParams {
+  SceneLayout layout = SceneLayout::room;
   int frames = 300;
   int width = 640, height = 480;  ///< intrinsics scale with width: f = 525 * width / 640
-  int moving_objects = 3;         ///< 0..8 (0: a static room)
+  int moving_objects = 3;         ///< 0..8 in the room, 0..6 in the corridor (0: a static scene)
   std::uint64_t seed = 1;         ///< object placement, motions, fast segments and depth noise
   bool moving_camera = true;      ///< false: the camera stays at its first pose
-  CameraPath camera_path = CameraPath::hand_held;
+  CameraPath camera_path = CameraPath::hand_held;  ///< the room's camera (the corridor has its own walk)
   DepthNoise noise{};
 };
 
@@ -812,10 +826,193 @@ DynamicScene<S> make_dynamic_room(const DynamicSceneParams& params = {}) {
                          std::move(T_world_camera), params.noise, params.seed, detail::room::fps);
 }
 
+namespace detail::corridor {
+
+using room::fps;
+using room::pi;
+constexpr double length = 15;           // m, x in [-1.5, 13.5]
+constexpr double half_width = 1.5;      // m, y in [-1.5, 1.5]
+constexpr double walk = 11;             // m the camera travels, from x = 0.5
+constexpr double ramp = 0.1;            // share of the walk spent speeding up (and slowing down)
+constexpr double table_x[3] = {1.5, 5.5, 9.5};  // table centres; tops span x +- 1.1, y in [0.6, 1.3]
+constexpr double table_top = room::table_top;
+// Table kinds of detail::room::kinds, in the order objects are created:
+// car, cup, book, teddy bear, laptop, and the car again.
+constexpr int object_kind[6] = {0, 1, 2, 4, 6, 0};
+
+/// Share of the walk done at u in [0, 1]: speed sin^2-eased from rest over
+/// the first and last `ramp` of the time, constant between.
+inline double walked(double u) {
+  u = std::fmin(1.0, std::fmax(0.0, u));
+  const auto start = [](double v) { return v / 2 - ramp / (2 * pi) * std::sin(pi * v / ramp); };
+  const double d = u < ramp ? start(u) : u > 1 - ramp ? (1 - ramp) - start(1 - u) : ramp / 2 + (u - ramp);
+  return d / (1 - ramp);
+}
+
+/// The walk at time t of a sequence lasting `duration` seconds: the eye
+/// 0.8 m from the corridor's middle towards the bare wall, at eye height,
+/// looking at the tables' wall a little ahead of itself, with a hand-held
+/// sway.
+inline SE3<double> camera_pose_at(double t, double duration) {
+  const double x = 0.5 + walk * walked(duration > 0 ? t / duration : 0.0);
+  const double w = 2 * pi;
+  const Vec3<double> eye = vec3(x, -0.8 + 0.08 * std::sin(w * t / 7), 1.55 + 0.05 * std::sin(w * t / 5 + 1));
+  const Vec3<double> target = vec3(x + 0.7 + 0.25 * std::sin(w * t / 9), 1.1, 0.55 + 0.12 * std::sin(w * t / 6));
+  return look_at(eye, target, vec3(0.0, 0.0, 1.0));
+}
+
+/// The corridor: floor, ceiling, two long walls and the end walls; along the
+/// +y wall three tables with cabinets and shelves of different heights
+/// between them; along the -y wall a few boxes.
+template <class S>
+std::vector<Shape<S>> static_shapes() {
+  auto v = [](double x, double y, double z) { return vec3(S(x), S(y), S(z)); };
+  auto plane = [&](Vec3<S> on, Vec3<S> inside, Vec3<S> up) { return make_plane(look_at(on, inside, up)); };
+  auto box = [&](double x, double y, double z, double hx, double hy, double hz, double yaw = 0) {
+    return make_box(SE3<S>(so3_exp(v(0, 0, yaw)), v(x, y, z)), v(hx, hy, hz));
+  };
+  const Vec3<S> up = v(0, 0, 1);
+  const double x0 = -1.5, x1 = x0 + length, xm = (x0 + x1) / 2;
+  std::vector<Shape<S>> shapes = {
+      make_plane(SE3<S>::identity()),                 // floor, z = 0
+      plane(v(xm, 0, 2.8), v(xm, 0, 0), v(1, 0, 0)),  // ceiling
+      plane(v(xm, half_width, 1.4), v(xm, 0, 1.4), up),  // the tables' wall
+      plane(v(xm, -half_width, 1.4), v(xm, 0, 1.4), up),
+      plane(v(x0, 0, 1.4), v(xm, 0, 1.4), up),  // end walls
+      plane(v(x1, 0, 1.4), v(xm, 0, 1.4), up),
+  };
+  for (double x : table_x) shapes.push_back(box(x, 0.95, table_top - 0.02, 1.1, 0.35, 0.02));  // table tops
+  // Between and beside the tables, against the wall: furniture of different
+  // heights and depths, so that the wall shows structure along x everywhere.
+  shapes.push_back(box(-0.6, 1.3, 0.9, 0.3, 0.2, 0.9));    // tall shelf
+  shapes.push_back(box(3.5, 1.25, 0.45, 0.45, 0.25, 0.45));  // cabinet
+  shapes.push_back(box(3.6, 1.2, 1.3, 0.2, 0.2, 0.35, 0.4));  // box on it, turned
+  shapes.push_back(box(7.5, 1.3, 0.7, 0.35, 0.2, 0.7));     // shelf
+  shapes.push_back(make_cylinder(SE3<S>::translation(v(7.0, 1.0, 0.3)), S(0.2), S(0.3)));  // bin
+  shapes.push_back(box(11.4, 1.25, 0.35, 0.3, 0.25, 0.35, -0.3));  // crate
+  shapes.push_back(box(12.4, 1.3, 1.0, 0.35, 0.2, 1.0));           // tall cabinet
+  // Along the bare wall, seen when the view swings.
+  shapes.push_back(box(2.5, -1.3, 0.4, 0.4, 0.2, 0.4));
+  shapes.push_back(box(8.5, -1.25, 0.6, 0.3, 0.25, 0.6, 0.2));
+  return shapes;
+}
+
+/// Object k's plan: on table k / 2 (its left or right half, k % 2), at rest
+/// until the camera comes near, then one or two eased moves (up to 0.3 m and
+/// 60 degrees, lifted and tilted, peak 0.35 m/s and 50 deg/s) while the
+/// camera passes, then at rest again. Halves are 0.2 m apart and an object
+/// keeps its radius inside its half: objects never overlap.
+inline room::ObjectPlan plan_object(int k, int frames, std::uint64_t seed, double radius,
+                                    const std::vector<SE3<double>>& T_world_camera) {
+  room::ObjectPlan p;
+  const room::Kind& kind = room::kinds[object_kind[k]];
+  const double xc = table_x[k / 2];
+  p.radius = radius;
+  p.z_rest = table_top + kind.half_height;
+  p.x_lo = k % 2 == 0 ? xc - 1.05 + radius : xc + 0.1 + radius;
+  p.x_hi = k % 2 == 0 ? xc - 0.1 - radius : xc + 1.05 - radius;
+  p.y_lo = 0.6 + radius, p.y_hi = 1.3 - radius;
+  HashRng rng(seed, 3000 + std::uint64_t(k));
+  p.x = rng.uniform(p.x_lo, p.x_hi), p.y = rng.uniform(p.y_lo, p.y_hi), p.yaw = rng.uniform(-pi, pi);
+  // Frames in which the camera looks at the object's half of the table.
+  int first = -1, last = -1;
+  for (int f = 0; f < frames; ++f) {
+    const Vec3<double> e = T_world_camera[std::size_t(f)].translation();
+    if (std::fabs(e.x() + 0.7 - 0.5 * (p.x_lo + p.x_hi)) < 1.2) {
+      if (first < 0) first = f;
+      last = f;
+    }
+  }
+  if (first < 0) return p;
+  int f0 = first + rng.integer(5, 20);
+  for (int move = 0; move < 2; ++move) {
+    const room::ObjectPlan::State s = p.state(f0);
+    for (int attempt = 0; attempt < 60; ++attempt) {
+      room::Motion m;
+      m.f0 = f0;
+      m.x0 = s.x, m.y0 = s.y, m.yaw0 = s.yaw;
+      const double distance = rng.uniform(0.1, 0.3), heading = rng.uniform(-pi, pi);
+      m.x1 = s.x + distance * std::cos(heading), m.y1 = s.y + distance * std::sin(heading);
+      if (m.x1 < p.x_lo || m.x1 > p.x_hi || m.y1 < p.y_lo || m.y1 > p.y_hi) continue;
+      const double turn = rng.uniform(20, 60) * pi / 180;
+      m.yaw1 = s.yaw + (rng.bernoulli(0.5) ? turn : -turn);
+      m.lift = rng.uniform(0.03, 0.08);
+      m.tilt = rng.uniform() * std::fmin(0.2, m.lift / (1.3 * radius));
+      m.tilt_direction = rng.uniform(-pi, pi);
+      const double linear =
+          std::sqrt(std::pow(1.875 * distance, 2) + std::pow(pi * m.lift, 2)) / room::max_speed;
+      const double angular = (1.875 * turn + pi * m.tilt) / room::max_turn_rate;
+      m.f1 = f0 + std::max(20, int(std::ceil(std::fmax(linear, angular) * fps)));
+      if (m.f1 > last || m.f1 >= frames) continue;  // another draw may be shorter
+      p.motions.push_back(m);
+      f0 = m.f1 + rng.integer(5, 15);
+      break;
+    }
+  }
+  return p;
+}
+
+}  // namespace detail::corridor
+
+/// A corridor 15 m long (x in [-1.5, 13.5], y in [-1.5, 1.5], 2.8 m high)
+/// with three tables and furniture along its +y wall, walked along by a
+/// hand-held camera that travels 11 m (from x = 0.5, eased from and to rest,
+/// about 0.6 m/s on 20 s) looking at the tables; `moving_objects` (0..6)
+/// objects on the tables, two per table, at rest until the camera comes
+/// near, then moved once or twice while it passes (up to 0.3 m and 60
+/// degrees; eased, lifted and tilted). Object k is "<class>_<k+1>": car,
+/// cup, book, teddy_bear, laptop, car. A world no 5 m volume around the first
+/// camera holds: the scene of the sparse background (docs/volumes.md).
+/// params.camera_path is not used.
+template <class S>
+DynamicScene<S> make_dynamic_corridor(const DynamicSceneParams& params = {}) {
+  const char* where = "make_dynamic_corridor";
+  emfusion::detail::require(params.moving_objects >= 0 && params.moving_objects <= 6, where,
+                            "moving_objects must be in 0..6, got " + std::to_string(params.moving_objects));
+  emfusion::detail::require(params.frames >= 1, where, "frames must be >= 1, got " + std::to_string(params.frames));
+  emfusion::detail::require(
+      params.width >= 16 && params.height >= 16, where,
+      "image size must be at least 16x16, got " + std::to_string(params.width) + "x" + std::to_string(params.height));
+  params.noise.validate(where);
+  const double f = 525.0 * params.width / 640.0;
+  const PinholeCamera<double> camera{
+      f, f, (params.width - 1) / 2.0, (params.height - 1) / 2.0, params.width, params.height};
+  const double duration = (params.frames - 1) / detail::corridor::fps;
+  std::vector<SE3<double>> T_world_camera;
+  for (int i = 0; i < params.frames; ++i)
+    T_world_camera.push_back(
+        detail::corridor::camera_pose_at(params.moving_camera ? i / detail::corridor::fps : 0.0, duration));
+  std::vector<MovingObject<S>> objects;
+  for (int k = 0; k < params.moving_objects; ++k) {
+    const int kind = detail::corridor::object_kind[k];
+    MovingObject<S> o;
+    o.class_name = detail::room::kinds[kind].class_name;
+    o.name = o.class_name + "_" + std::to_string(k + 1);
+    o.shapes = detail::room::kind_shapes<S>(kind);
+    double r = 0;
+    for (const Shape<S>& shape : o.shapes) r = std::fmax(r, detail::bounding_radius(shape));
+    const detail::room::ObjectPlan plan =
+        detail::corridor::plan_object(k, params.frames, params.seed, r, T_world_camera);
+    for (int i = 0; i < params.frames; ++i) o.T_world_object.push_back(plan.pose(i));
+    objects.push_back(std::move(o));
+  }
+  return DynamicScene<S>(camera.template cast<S>(), detail::corridor::static_shapes<S>(), std::move(objects),
+                         std::move(T_world_camera), params.noise, params.seed, detail::corridor::fps);
+}
+
+/// The scene params.layout names: make_dynamic_room or make_dynamic_corridor.
+template <class S>
+DynamicScene<S> make_dynamic_scene(const DynamicSceneParams& params = {}) {
+  if (params.layout == SceneLayout::corridor) return make_dynamic_corridor<S>(params);
+  emfusion::detail::require(params.layout == SceneLayout::room, "make_dynamic_scene",
+                            "layout must be room or corridor, got " + std::to_string(int(params.layout)));
+  return make_dynamic_room<S>(params);
+}
+
 /// A dynamic scene as a FrameSource (float depth on the host, noisy).
 class SyntheticSequence {
  public:
-  explicit SyntheticSequence(const DynamicSceneParams& params = {}) : scene_(make_dynamic_room<float>(params)) {}
+  explicit SyntheticSequence(const DynamicSceneParams& params = {}) : scene_(make_dynamic_scene<float>(params)) {}
   explicit SyntheticSequence(DynamicScene<float> scene) : scene_(std::move(scene)) {}
 
   std::size_t size() const { return std::size_t(scene_.frame_count()); }
