@@ -8,13 +8,17 @@
 // input's reference trajectory (the scene's exact poses, or groundtruth.txt).
 //
 //   track_camera <sequence-dir|synthetic:scene> <trajectory.txt> [--ground-truth FILE] [--backend cpu|cuda]
-//                [--max-frames N] [--voxels N] [--voxel-size M] [--stride N] [--tau T]
+//                [--max-frames N] [--volume dense|sparse] [--blocks N] [--voxels N]
+//                [--voxel-size M] [--stride N] [--tau T]
 //                [--integration paper|refined] [--behind-band F] [--silhouette-guard VOXELS]
 //                [--bilateral-radius R] [--central-gradient] [--depth-weight Z] [--store float|half]
 //                [--huber VOXELS] [--truncation VOXELS] [--integrate-filtered]
 //                [--pyramid LEVELS] [--predict] [--retry] [--photometric WEIGHT]
 //                [--photometric-huber H] [--verbose]
 //
+// --volume sparse tracks against a sparse voxel-block volume, unbounded,
+// of at most --blocks blocks of 8^3 voxels (volume/sparse_tsdf_volume.hpp);
+// dense is the paper's cube of --voxels^3 in front of the first camera.
 // --store half keeps the volume's SDF and weight in 16 bits (core/half.hpp).
 // --huber and --truncation change the paper's 2 and 10 voxels;
 // --integrate-filtered fuses the bilateral-filtered depth instead of the raw
@@ -46,6 +50,7 @@
 #include "emfusion/solve/photometric.hpp"
 #include "emfusion/solve/sdf_alignment.hpp"
 #include "emfusion/volume/integrate.hpp"
+#include "emfusion/volume/sparse_tsdf_volume.hpp"
 #include "support/args.hpp"
 #include "support/camera_input.hpp"
 
@@ -68,28 +73,19 @@ struct Options {
   int bilateral_radius = -1;  // -1: the filter's default
   double depth_weight = 0;    // SdfAlignmentParams::depth_noise_reference; 0 = off
   std::string store = "float";
+  std::string volume = "dense";  // --volume dense|sparse
+  int blocks = 1 << 18;          // --blocks: the sparse volume's capacity
   bool integrate_filtered = false;
   double huber_voxels = 2, truncation_voxels = 10;
   double photometric = 0, photometric_huber = 0.05;  // --photometric: weight of the colour term; 0 = off
 };
 
-template <class B, class Store>
-void track(const Options& o) {
-  const B backend{};
-  const examples::CameraInput seq(o.sequence);
-  if (!o.ground_truth.empty()) write_tum_trajectory(o.ground_truth, seq.ground_truth());
+/// Tracks the sequence against `volume` (dense or sparse), integrating
+/// every frame into it, and writes the trajectory.
+template <class B, class Volume>
+void track_with(const Options& o, const examples::CameraInput& seq, Volume& volume, const B& backend) {
   const PinholeCamera<S> camera = seq.camera().cast<S>();
-  if (o.photometric > 0 && !seq.has_colour())
-    throw std::runtime_error("--photometric needs colour images, and '" + o.sequence + "' has none");
   const int frames = o.max_frames > 0 && o.max_frames < int(seq.size()) ? o.max_frames : int(seq.size());
-
-  // The paper's background: camera at the centre of one face of the cube.
-  VolumeGeometry<S> geometry;
-  geometry.dims = Vec3i{{o.voxels, o.voxels, o.voxels}};
-  geometry.voxel_size = S(o.voxel_size);
-  geometry.truncation = S(o.truncation_voxels * o.voxel_size);
-  geometry.T_world_volume = volume_pose_in_front_of(SE3<S>::identity(), S(o.voxels * o.voxel_size));
-  TsdfVolume<S, B, Store> volume(geometry, backend);
   const HuberNorm<S> huber{S(o.huber_voxels) * volume.voxel_size()};
   SdfAlignmentParams<S> align;
   align.pixel_stride = o.stride;
@@ -117,6 +113,8 @@ void track(const Options& o) {
   const MotionBound<S> bound{};  // the system's per-frame bound judges a solve for --retry
   const SE3<S> T_world_volume = volume.pose(), T_volume_world = T_world_volume.inverse();
   double track_ms = 0, integrate_ms = 0;
+  SparseIntegrationWorkspace<S, B> sparse_workspace;  // the sparse volume's allocation buffers
+  long long refused = 0;                               // blocks a full sparse volume refused
   using clock = std::chrono::steady_clock;
   const auto ms_since = [&](clock::time_point t0) {
     backend.synchronize();
@@ -157,7 +155,13 @@ void track(const Options& o) {
     const SolveReport& report = t.report;
     track_ms += ms_since(t0);
     t0 = clock::now();
-    integrate(volume, o.integrate_filtered ? filtered : depth, camera, T_world_camera, static_cast<const Image<S, B>*>(nullptr), fusion);
+    const Image<S, B>& fused = o.integrate_filtered ? filtered : depth;
+    if constexpr (requires { volume.allocated_blocks(); })
+      refused += integrate(volume, fused, camera, T_world_camera, static_cast<const Image<S, B>*>(nullptr), fusion,
+                           &sparse_workspace)
+                     .allocation.refused;
+    else
+      integrate(volume, fused, camera, T_world_camera, static_cast<const Image<S, B>*>(nullptr), fusion);
     integrate_ms += ms_since(t0);
     trajectory.push_back({seq.timestamp(i), T_world_camera.template cast<double>()});
     if (o.photometric > 0) std::swap(previous_points, points), std::swap(previous_intensity, intensity);
@@ -169,6 +173,39 @@ void track(const Options& o) {
   write_tum_trajectory(o.output, trajectory);
   fmt::print("{} frames on {}: preprocess + tracking {:.1f} ms, integration {:.1f} ms per frame (mean)\n", frames,
              B::name, track_ms / frames, integrate_ms / frames);
+  if constexpr (requires { volume.allocated_blocks(); }) {
+    fmt::print("volume: sparse, {} blocks of 8^3 voxels, {:.1f} MiB\n", volume.allocated_blocks(),
+               double(volume.memory_bytes()) / (1 << 20));
+    if (refused > 0)
+      fmt::print(stderr, "track_camera: the volume was full: {} block allocations refused (raise --blocks)\n", refused);
+  } else {
+    fmt::print("volume: dense, {}^3 voxels, {:.1f} MiB\n", volume.dims()[0], double(volume.memory_bytes()) / (1 << 20));
+  }
+}
+
+/// The volume --volume asks for, then track_with.
+template <class B, class Store>
+void track(const Options& o) {
+  const B backend{};
+  const examples::CameraInput seq(o.sequence);
+  if (!o.ground_truth.empty()) write_tum_trajectory(o.ground_truth, seq.ground_truth());
+  if (o.photometric > 0 && !seq.has_colour())
+    throw std::runtime_error("--photometric needs colour images, and '" + o.sequence + "' has none");
+  const S truncation = S(o.truncation_voxels * o.voxel_size);
+  if (o.volume == "sparse") {
+    // Unbounded: the volume frame is the world's (the first camera's).
+    SparseTsdfVolume<S, B, Store> volume(S(o.voxel_size), truncation, SE3<S>::identity(), o.blocks, backend);
+    track_with(o, seq, volume, backend);
+    return;
+  }
+  // The paper's background: camera at the centre of one face of the cube.
+  VolumeGeometry<S> geometry;
+  geometry.dims = Vec3i{{o.voxels, o.voxels, o.voxels}};
+  geometry.voxel_size = S(o.voxel_size);
+  geometry.truncation = truncation;
+  geometry.T_world_volume = volume_pose_in_front_of(SE3<S>::identity(), S(o.voxels * o.voxel_size));
+  TsdfVolume<S, B, Store> volume(geometry, backend);
+  track_with(o, seq, volume, backend);
 }
 
 Options parse(int argc, char** argv) {
@@ -198,6 +235,11 @@ Options parse(int argc, char** argv) {
     else if (a == "--depth-weight") o.depth_weight = examples::parse_positive_double(a, v);
     else if (a == "--photometric") o.photometric = examples::parse_positive_double(a, v);
     else if (a == "--photometric-huber") o.photometric_huber = examples::parse_positive_double(a, v);
+    else if (a == "--blocks") o.blocks = examples::parse_int(a, v, 1, 1 << 26);
+    else if (a == "--volume") {
+      if (v != "dense" && v != "sparse") throw std::invalid_argument("--volume must be dense or sparse");
+      o.volume = v;
+    }
     else if (a == "--store") {
       if (v != "float" && v != "half") throw std::invalid_argument("--store must be float or half");
       o.store = v;
@@ -211,7 +253,8 @@ Options parse(int argc, char** argv) {
   if (positional.size() != 2)
     throw std::invalid_argument("usage: track_camera <sequence-dir|synthetic:scene> <trajectory.txt> "
                                 "[--ground-truth FILE] [--backend cpu|cuda] "
-                                "[--max-frames N] [--voxels N] [--voxel-size M] [--stride N] [--tau T] "
+                                "[--max-frames N] [--volume dense|sparse] [--blocks N] [--voxels N] "
+                                "[--voxel-size M] [--stride N] [--tau T] "
                                 "[--integration paper|refined] [--behind-band F] [--silhouette-guard G] "
                                 "[--bilateral-radius R] [--depth-weight Z] [--central-gradient] [--store float|half] "
                                 "[--huber VOXELS] [--truncation VOXELS] [--integrate-filtered] "

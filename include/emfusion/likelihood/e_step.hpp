@@ -7,7 +7,9 @@
 // One association image per model, in the order the models are given
 // (the system puts the background first). Models are of one type M
 // satisfying MeasurementLikelihood; each comes with the pose that maps camera
-// points into its volume frame.
+// points into its volume frame. A second form takes the background's model
+// apart, of a type of its own (a model of a sparse background beside dense
+// objects), and gives the same numbers as the first when the types agree.
 #pragma once
 
 #include <algorithm>
@@ -26,6 +28,18 @@
 #include "emfusion/likelihood/measurement_likelihood.hpp"
 
 namespace emfusion {
+
+template <class S, Backend B>
+class Associations;
+
+namespace detail {
+/// The background model of the E-step's first form: none.
+struct NoBackground {};
+template <class S, Backend B, class M, class Objects>
+void run_e_step(const B& backend, const Image<Vec3<S>, B>& points, const M* background,
+                const SE3<S>& T_background_camera, std::span<const Objects> objects,
+                std::span<const SE3<S>> T_object_camera, Associations<S, B>& out);
+}  // namespace detail
 
 /// The E-step's output: one association image per model. Reuse one object
 /// across frames: images and scratch buffers are kept while sizes stay.
@@ -46,9 +60,9 @@ class Associations {
   }
 
  private:
-  template <class S2, Backend B2, class M>
-  friend void e_step(const B2&, const Image<Vec3<S2>, B2>&, std::span<const M>, std::span<const SE3<S2>>,
-                     Associations<S2, B2>&);
+  template <class S2, Backend B2, class M, class Objects>
+  friend void detail::run_e_step(const B2&, const Image<Vec3<S2>, B2>&, const M*, const SE3<S2>&,
+                                 std::span<const Objects>, std::span<const SE3<S2>>, Associations<S2, B2>&);
 
   std::vector<Image<S, B>> images_;
   // Models, poses and output views as bytes on the backend, so that a kernel
@@ -80,6 +94,35 @@ struct EStepPixel {
   }
 };
 
+/// EStepPixel with a background model of its own type before the others;
+/// the same sums in the same order.
+template <class S, class MB, class M>
+struct EStepBackgroundPixel {
+  ImageView<const Vec3<S>> points;
+  MB background;
+  SE3<S> T_background_camera;
+  const M* models;
+  const SE3<S>* T_volume_camera;
+  ImageView<S>* out;  ///< the background's first, then one per model
+  int model_count;
+
+  EMF_HD void operator()(int i) const {
+    const Vec3<S> p = points[i];
+    const bool valid = std::isfinite(p.x()) && std::isfinite(p.y()) && std::isfinite(p.z());
+    S total = S(0);
+    const S l0 = valid ? likelihood_of(background, T_background_camera * p, p) : S(0);
+    out[0][i] = l0;
+    total += l0;
+    for (int k = 0; k < model_count; ++k) {
+      const S l = valid ? likelihood_of(models[k], T_volume_camera[k] * p, p) : S(0);
+      out[k + 1][i] = l;
+      total += l;
+    }
+    const S scale = total > S(0) ? S(1) / total : S(0);
+    for (int k = 0; k <= model_count; ++k) out[k][i] *= scale;
+  }
+};
+
 /// Bytes needed to place `count` objects of T after `offset`, aligned.
 template <class T>
 std::size_t place(std::size_t& offset, std::size_t count) {
@@ -97,37 +140,72 @@ std::size_t place(std::size_t& offset, std::size_t count) {
 template <class S, Backend B, class M>
 void e_step(const B& backend, const Image<Vec3<S>, B>& points, std::span<const M> models,
             std::span<const SE3<S>> T_volume_camera, Associations<S, B>& out) {
-  static_assert(MeasurementLikelihood<M, S>, "the model type must satisfy MeasurementLikelihood");
-  static_assert(std::is_trivially_copyable_v<M>, "likelihood models are copied to the backend as bytes");
-  detail::require(models.size() == T_volume_camera.size(), "e_step",
-                  std::to_string(models.size()) + " models but " + std::to_string(T_volume_camera.size()) + " poses");
-  detail::require(!points.empty(), "e_step", "the vertex map is empty");
-  const int n = int(models.size());
+  detail::run_e_step(backend, points, static_cast<const detail::NoBackground*>(nullptr), SE3<S>::identity(), models,
+                     T_volume_camera, out);
+}
+
+/// The same with the background's model apart, of a type of its own (e.g.
+/// PaperLikelihood over a SparseTsdfView beside dense objects): image 0 is
+/// the background's, image k + 1 object k's. With models of one type it
+/// gives exactly what the first form gives for {background, objects...}.
+template <class S, Backend B, class Background, class M>
+void e_step(const B& backend, const Image<Vec3<S>, B>& points, const Background& background,
+            const SE3<S>& T_background_camera, std::span<const M> objects, std::span<const SE3<S>> T_object_camera,
+            Associations<S, B>& out) {
+  static_assert(MeasurementLikelihood<Background, S>, "the background model must satisfy MeasurementLikelihood");
+  static_assert(std::is_trivially_copyable_v<Background>, "likelihood models are copied to the backend as bytes");
+  detail::run_e_step(backend, points, &background, T_background_camera, objects, T_object_camera, out);
+}
+
+namespace detail {
+
+/// Both forms of e_step: `background` (a NoBackground: none) before the
+/// models of `objects`.
+template <class S, Backend B, class M, class Objects>
+void run_e_step(const B& backend, const Image<Vec3<S>, B>& points, const M* background,
+                const SE3<S>& T_background_camera, std::span<const Objects> objects,
+                std::span<const SE3<S>> T_object_camera, Associations<S, B>& out) {
+  static_assert(MeasurementLikelihood<Objects, S>, "the model type must satisfy MeasurementLikelihood");
+  static_assert(std::is_trivially_copyable_v<Objects>, "likelihood models are copied to the backend as bytes");
+  require(objects.size() == T_object_camera.size(), "e_step",
+          std::to_string(objects.size()) + " models but " + std::to_string(T_object_camera.size()) + " poses");
+  require(!points.empty(), "e_step", "the vertex map is empty");
+  constexpr bool apart = !std::is_same_v<M, NoBackground>;
+  const int first = apart ? 1 : 0;
+  const int n = int(objects.size()) + first;
   out.resize(n, points.width(), points.height(), backend);
   if (n == 0) return;
 
   std::vector<ImageView<S>> views;
   for (int k = 0; k < n; ++k) views.push_back(out.image(k).view());
   std::size_t size = 0;
-  const std::size_t at_models = detail::place<M>(size, models.size());
-  const std::size_t at_poses = detail::place<SE3<S>>(size, models.size());
-  const std::size_t at_views = detail::place<ImageView<S>>(size, views.size());
+  const std::size_t at_models = place<Objects>(size, objects.size());
+  const std::size_t at_poses = place<SE3<S>>(size, objects.size());
+  const std::size_t at_views = place<ImageView<S>>(size, views.size());
   std::vector<unsigned char> bytes(size);
   const auto put = [&](std::size_t at, const void* from, std::size_t count) {
-    if (at + count > bytes.size()) return;  // never: `size` covers every entry
+    if (count == 0 || at + count > bytes.size()) return;  // never past the end: `size` covers every entry
     const auto* b = static_cast<const unsigned char*>(from);
     std::copy(b, b + count, bytes.begin() + std::ptrdiff_t(at));
   };
-  put(at_models, models.data(), models.size() * sizeof(M));
-  put(at_poses, T_volume_camera.data(), models.size() * sizeof(SE3<S>));
+  put(at_models, objects.data(), objects.size() * sizeof(Objects));
+  put(at_poses, T_object_camera.data(), objects.size() * sizeof(SE3<S>));
   put(at_views, views.data(), views.size() * sizeof(ImageView<S>));
   if (out.scratch_.size() < size) out.scratch_.resize(size);
   thrust::copy(bytes.begin(), bytes.end(), out.scratch_.begin());
   unsigned char* base = thrust::raw_pointer_cast(out.scratch_.data());
-  detail::EStepPixel<S, M> f{points.view(), reinterpret_cast<const M*>(base + at_models),
-                             reinterpret_cast<const SE3<S>*>(base + at_poses),
-                             reinterpret_cast<ImageView<S>*>(base + at_views), n};
-  for_each_index(backend, points.size(), f);
+  const auto* models = reinterpret_cast<const Objects*>(base + at_models);
+  const auto* poses = reinterpret_cast<const SE3<S>*>(base + at_poses);
+  auto* images = reinterpret_cast<ImageView<S>*>(base + at_views);
+  if constexpr (apart) {
+    for_each_index(backend, points.size(),
+                   EStepBackgroundPixel<S, M, Objects>{points.view(), *background, T_background_camera, models, poses,
+                                                       images, int(objects.size())});
+  } else {
+    for_each_index(backend, points.size(), EStepPixel<S, Objects>{points.view(), models, poses, images, n});
+  }
 }
+
+}  // namespace detail
 
 }  // namespace emfusion

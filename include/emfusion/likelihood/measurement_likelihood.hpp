@@ -17,6 +17,13 @@
 // substitute their own type, with parameters of their own, without touching
 // the library: examples/custom_likelihood.cpp defines one whose Laplace
 // scale grows with depth and runs it through the full system.
+//
+// A model reads its volume through a view, a dense TsdfView by default; the
+// volume parameter of PaperLikelihood (solve/volume_parameter.hpp) makes it
+// read a sparse one instead, `PaperLikelihood<S, SparseTsdfView<S, const S>>`
+// for a sparse background, and `with_volume_t<M, View>` names a model type
+// moved onto another view. e_step (likelihood/e_step.hpp) takes a background
+// model of one type and object models of another.
 #pragma once
 
 #include <cmath>
@@ -25,8 +32,10 @@
 
 #include "emfusion/core/host_device.hpp"
 #include "emfusion/core/math.hpp"
+#include "emfusion/solve/volume_parameter.hpp"
 #include "emfusion/volume/foreground.hpp"
 #include "emfusion/volume/tsdf_volume.hpp"
+#include "emfusion/volume/volume_view.hpp"
 
 namespace emfusion {
 
@@ -55,23 +64,32 @@ EMF_HD S likelihood_of(const M& model, const Vec3<S>& p_volume, const Vec3<S>& p
 /// system uses one for the background and every object: the system copies
 /// the model the user configured and points `volume` and `foreground` at
 /// each model's maps (`foreground` is empty for the background). Copied to
-/// the backend as bytes, so trivially copyable.
-template <class M, class S>
+/// the backend as bytes, so trivially copyable. `View` is the view of the
+/// volumes it reads: the dense TsdfView by default, SparseTsdfView for a
+/// model of a sparse volume.
+template <class M, class S, class View = TsdfView<S, const S>>
 concept VolumeLikelihood = MeasurementLikelihood<M, S> && std::is_trivially_copyable_v<M> &&
-                           requires(M& model, TsdfView<S, const S> volume, ForegroundView<S, const float> fg) {
+                           requires(M& model, View volume, ForegroundView<S, const float> fg) {
                              model.volume = volume;
                              model.foreground = fg;
                            };
 
-/// `prototype` pointed at a volume and its foreground counts (empty: none).
-template <class S, class M>
-  requires VolumeLikelihood<M, S>
-M bind_volume(const M& prototype, TsdfView<S, const S> volume, ForegroundView<S, const float> foreground = {}) {
+/// `prototype` pointed at a volume (its view, dense or sparse) and its
+/// foreground counts (empty: none, as for the background).
+template <class S, class M, class View>
+  requires VolumeLikelihood<M, S, View>
+M bind_volume(const M& prototype, const View& volume, ForegroundView<S, const float> foreground = {}) {
   M model = prototype;
   model.volume = volume;
   model.foreground = foreground;
   return model;
 }
+
+/// Model type M moved onto volumes of view type `View`: M's member template
+/// `with_volume<View>` (PaperLikelihood has one; a user's model that can
+/// read other volumes declares its own).
+template <class M, class View>
+using with_volume_t = typename M::template with_volume<View>;
 
 /// Parameters of eq. 7 (paper and reference values).
 template <class S>
@@ -90,16 +108,26 @@ struct LikelihoodParams {
 
 /// The paper's mixture (eq. 7) on a TSDF volume, with the voxels' foreground
 /// probability when `foreground` is set (objects) and p_fg = 1 without
-/// (the background).
-template <class S, class Store = S, class Count = float>
+/// (the background). `Volume` names the volume read (volume_parameter.hpp):
+/// the storage scalar of a dense volume (the default, S: TsdfView<S,
+/// const S>, as before) or a view type, e.g. SparseTsdfView<S, const S>.
+template <class S, class Volume = S, class Count = float>
 struct PaperLikelihood {
-  TsdfView<S, const Store> volume;
+  using View = volume_sampler_t<S, Volume>;
+  /// The same model over volumes of another view type.
+  template <class OtherView>
+  using with_volume = PaperLikelihood<S, volume_parameter_t<OtherView>, Count>;
+
+  View volume;
   ForegroundView<S, const Count> foreground;  ///< empty for the background
   LikelihoodParams<S> params;
 
   EMF_HD S likelihood(const Vec3<S>& p) const {
-    // Outside the grid the model says nothing about the point.
-    if (!volume.contains_point(p)) return S(0);
+    // Outside the grid the model says nothing about the point (a sparse
+    // volume's grid is its whole addressable range).
+    if constexpr (requires { volume.contains_point(p); }) {
+      if (!volume.contains_point(p)) return S(0);
+    }
     // Inside it, space never observed is as far from a surface as the map
     // can say: the truncation distance. This keeps a new object's empty
     // volume at the outlier level instead of zero.
@@ -111,5 +139,7 @@ struct PaperLikelihood {
 
 static_assert(VolumeLikelihood<PaperLikelihood<float>, float>);
 static_assert(VolumeLikelihood<PaperLikelihood<double>, double>);
+static_assert(std::is_same_v<with_volume_t<PaperLikelihood<float>, TsdfView<float, const float>>,
+                             PaperLikelihood<float>>);
 
 }  // namespace emfusion

@@ -92,7 +92,8 @@ struct PoseStarts {
   std::optional<SE3<S>> predicted;
 };
 
-/// Solves one SDF alignment in `volume` (poses are T_volume_camera) from
+/// Solves one SDF alignment in `volume` (dense or sparse; poses are
+/// T_volume_camera) from
 /// `starts`: from the prediction when the frame agrees with it at least as
 /// well as with the previous pose (agrees_at_least_as_well), else from the
 /// previous pose; with `retry`, once more from the other start when
@@ -100,13 +101,13 @@ struct PoseStarts {
 /// track.report) does not find the first solve `tracked`. Returns the pose
 /// of the solve taken (the retry's if it was tracked, else the first's) and
 /// fills `track`.
-template <class S, Backend B, class Store, class Norm, class Solver, class Judge>
-  requires RobustNorm<Norm, S> && PoseSolver<Solver, S>
-SE3<S> track_in_volume(const TsdfVolume<S, B, Store>& volume, const Image<Vec3<S>, B>& points,
-                       const Image<S, B>* association, const PoseStarts<S>& starts, const Norm& norm,
-                       const SdfAlignmentParams<S>& align, const Solver& solver, bool retry, Judge&& judge,
-                       PoseTrack& track, LinearizationCache<S, B>& cache, const B& backend) {
-  const SdfAlignmentTerms<S, Store> terms = sdf_alignment_in_box(volume, points, association, align, backend);
+template <class S, Backend B, class Volume, class Norm, class Solver, class Judge>
+  requires TsdfVolumeOn<Volume, S, B> && RobustNorm<Norm, S> && PoseSolver<Solver, S>
+SE3<S> track_in_volume(const Volume& volume, const Image<Vec3<S>, B>& points, const Image<S, B>* association,
+                       const PoseStarts<S>& starts, const Norm& norm, const SdfAlignmentParams<S>& align,
+                       const Solver& solver, bool retry, Judge&& judge, PoseTrack& track,
+                       LinearizationCache<S, B>& cache, const B& backend) {
+  const auto terms = sdf_alignment_in_box(volume, points, association, align, backend);
   const bool predicted_first =
       starts.predicted && agrees_at_least_as_well(backend, terms, norm, align, *starts.predicted, starts.previous);
   const auto solve_from = [&](bool from_prediction, PoseTrack& t) {

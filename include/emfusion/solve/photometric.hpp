@@ -149,17 +149,18 @@ SE3<S> align_photometric(const B& backend, const PhotometricTerms<S>& terms, con
   return solver.solve(lin, start, report);
 }
 
-/// The SDF term of `volume` (as align_to_volume) plus `weight` times the
-/// photometric term `photometric`, each with its own norm, minimised over
-/// T_world_camera with `solver` from `T_world_camera`, coarse to fine over
+/// The SDF term of `volume` (dense or sparse, as align_to_volume) plus
+/// `weight` times the photometric term `photometric`, each with its own
+/// norm, minimised over T_world_camera with `solver` from `T_world_camera`, coarse to fine over
 /// params.pyramid_levels levels (both terms take every 2^level-th of their
 /// pixels). photometric.T_frame_reference is the reference camera in the
 /// world: the function moves it into the volume's frame. weight = 0 is
 /// align_to_volume. The report is the finest level's, with the iterations
 /// of all levels added up.
-template <class S, Backend B, class Store, class Norm, class PhotometricNorm, class Solver>
-  requires RobustNorm<Norm, S> && RobustNorm<PhotometricNorm, S> && PoseSolver<Solver, S>
-SE3<S> align_to_volume_and_intensity(const TsdfVolume<S, B, Store>& volume, const Image<Vec3<S>, B>& points,
+template <class S, Backend B, class Volume, class Norm, class PhotometricNorm, class Solver>
+  requires TsdfVolumeOn<Volume, S, B> && RobustNorm<Norm, S> && RobustNorm<PhotometricNorm, S> &&
+           PoseSolver<Solver, S>
+SE3<S> align_to_volume_and_intensity(const Volume& volume, const Image<Vec3<S>, B>& points,
                                      const Image<S, B>* association, const SE3<S>& T_world_camera,
                                      const Norm& norm, const SdfAlignmentParams<S>& params,
                                      PhotometricTerms<S> photometric, const PhotometricNorm& photometric_norm,
@@ -169,12 +170,12 @@ SE3<S> align_to_volume_and_intensity(const TsdfVolume<S, B, Store>& volume, cons
   const B& backend = volume.backend();
   const SE3<S> T_volume_world = volume.pose().inverse();
   photometric.T_frame_reference = T_volume_world * photometric.T_frame_reference;
-  const SdfAlignmentTerms<S, Store> sdf = sdf_alignment_in_box(volume, points, association, params, backend);
+  const sdf_alignment_terms_t<S, Volume> sdf = sdf_alignment_in_box(volume, points, association, params, backend);
   const int photometric_stride = photometric.stride;
   const SE3<S> T = coarse_to_fine(
       params.pyramid_levels, T_volume_world * T_world_camera, report,
       [&](int level, const SE3<S>& from, SolveReport& r) {
-        const SdfAlignmentTerms<S, Store> sdf_level = at_level(sdf, params, level);
+        const sdf_alignment_terms_t<S, Volume> sdf_level = at_level(sdf, params, level);
         photometric.stride = photometric_stride << level;
         const auto lin = [&](const SE3<S>& pose, const SE3<S>* reference) {
           NormalEquations6 n = linearize(backend, sdf_level, norm, pose, reference);

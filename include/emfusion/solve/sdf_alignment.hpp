@@ -5,7 +5,9 @@
 // T_volume_camera. Each term is weighted by the pixel's association
 // likelihood q(u) and the normalised map confidence W(x) / W_norm; the
 // robust norm's IRLS weight comes on top (solve/normal_equations.hpp). Each
-// weight can be switched off, as the paper's ablations need.
+// weight can be switched off, as the paper's ablations need. Written once for
+// every volume of the volume concept (volume/volume_view.hpp): the dense
+// TsdfVolume of any storage and the sparse SparseTsdfVolume.
 #pragma once
 
 #include <cmath>
@@ -14,9 +16,12 @@
 #include "emfusion/core/parallel.hpp"
 #include "emfusion/core/se3.hpp"
 #include "emfusion/robust/norms.hpp"
+#include "emfusion/solve/nearby_samples.hpp"
 #include "emfusion/solve/normal_equations.hpp"
 #include "emfusion/solve/solvers.hpp"
+#include "emfusion/solve/volume_parameter.hpp"
 #include "emfusion/volume/tsdf_volume.hpp"
+#include "emfusion/volume/volume_view.hpp"
 
 namespace emfusion {
 
@@ -93,10 +98,13 @@ PixelBox positive_box(const B& backend, const Image<S, B>& weights) {
 /// T_volume_camera). Holds views: valid while the volume and images live.
 /// The terms are the pixels of `box` (the whole image when it is empty) on
 /// the grid of every `stride`-th pixel of the image, so a box changes which
-/// pixels take part but not how they are sampled.
-template <class S, class Store = S>
+/// pixels take part but not how they are sampled. `Volume` names the volume
+/// read (volume_parameter.hpp): the storage scalar of a dense volume, as
+/// before, or any TsdfSampler view (SparseTsdfView<S, const Store>).
+template <class S, class Volume = S>
 struct SdfAlignmentTerms {
-  TsdfView<S, const Store> volume;
+  using View = volume_sampler_t<S, Volume>;
+  View volume;
   ImageView<const Vec3<S>> points;  ///< camera frame; non-finite = no point
   ImageView<const S> association;   ///< q(u); empty = 1 everywhere
   S confidence_scale = S(0);        ///< 1 / W_norm; 0 = map confidence off
@@ -137,8 +145,11 @@ struct SdfAlignmentTerms {
     const Vec3<S> x = T_volume_camera * p;
     Vec3<S> g;
     S W;
-    if (!volume.sample_with_gradient(x, r, g, &W)) return false;
-    if (central_gradient && !volume.central_gradient(x, g)) return false;
+    // The view itself, or for a sparse one a sampler that looks each block
+    // up once for the term's samples (solve/nearby_samples.hpp).
+    auto&& sampler = nearby_sampler(volume);
+    if (!sampler.sample_with_gradient(x, r, g, &W)) return false;
+    if (central_gradient && !sampler.central_gradient(x, g)) return false;
     if (confidence_scale > S(0)) q *= (W * confidence_scale < S(1) ? W * confidence_scale : S(1));
     if (noise_reference_sigma > S(0)) {
       const S ratio = noise_reference_sigma / kinect_depth_sigma(p.z());
@@ -151,12 +162,20 @@ struct SdfAlignmentTerms {
   }
 };
 
-/// Builds the terms for a volume, a vertex map (camera frame) and an optional
-/// association image of the same size.
-template <class S, Backend B, class Store>
-SdfAlignmentTerms<S, Store> make_sdf_alignment(const TsdfVolume<S, B, Store>& volume,
-                                               const Image<Vec3<S>, B>& points, const Image<S, B>* association,
-                                               const SdfAlignmentParams<S>& params = {}) {
+/// The terms' type for an owning volume: SdfAlignmentTerms<S, Store> for a
+/// dense TsdfVolume<S, B, Store>, SdfAlignmentTerms<S, its ConstView>
+/// otherwise.
+template <class S, class Volume>
+using sdf_alignment_terms_t = SdfAlignmentTerms<S, volume_parameter_of_t<Volume>>;
+
+/// Builds the terms for a volume (dense or sparse: any TsdfVolumeType on the
+/// points' backend), a vertex map (camera frame) and an optional association
+/// image of the same size.
+template <class S, Backend B, class Volume>
+  requires TsdfVolumeOn<Volume, S, B>
+sdf_alignment_terms_t<S, Volume> make_sdf_alignment(const Volume& volume, const Image<Vec3<S>, B>& points,
+                                                    const Image<S, B>* association,
+                                                    const SdfAlignmentParams<S>& params = {}) {
   constexpr const char* where = "make_sdf_alignment";
   detail::require(!points.empty(), where, "the vertex map is empty");
   if (params.use_association && association)
@@ -165,7 +184,7 @@ SdfAlignmentTerms<S, Store> make_sdf_alignment(const TsdfVolume<S, B, Store>& vo
   detail::require(params.pyramid_levels >= 1 && params.pyramid_levels <= 6, where, "pyramid_levels must be in 1..6");
   detail::require(!params.use_map_confidence || params.confidence_normalizer > S(0), where,
                   "confidence_normalizer must be positive");
-  SdfAlignmentTerms<S, Store> t;
+  sdf_alignment_terms_t<S, Volume> t;
   t.volume = volume.view();
   t.points = points.view();
   if (params.use_association && association) t.association = association->view();
@@ -180,11 +199,12 @@ SdfAlignmentTerms<S, Store> make_sdf_alignment(const TsdfVolume<S, B, Store>& vo
 /// association is positive (positive_box, computed on `backend`): an
 /// object's association is zero outside the few pixels it covers, so its
 /// solve skips the rest in every iteration.
-template <class S, Backend B, class Store>
-SdfAlignmentTerms<S, Store> sdf_alignment_in_box(const TsdfVolume<S, B, Store>& volume,
-                                                 const Image<Vec3<S>, B>& points, const Image<S, B>* association,
-                                                 const SdfAlignmentParams<S>& params, const B& backend) {
-  SdfAlignmentTerms<S, Store> terms = make_sdf_alignment(volume, points, association, params);
+template <class S, Backend B, class Volume>
+  requires TsdfVolumeOn<Volume, S, B>
+sdf_alignment_terms_t<S, Volume> sdf_alignment_in_box(const Volume& volume, const Image<Vec3<S>, B>& points,
+                                                      const Image<S, B>* association,
+                                                      const SdfAlignmentParams<S>& params, const B& backend) {
+  sdf_alignment_terms_t<S, Volume> terms = make_sdf_alignment(volume, points, association, params);
   if (!terms.association.empty()) {
     terms.box = positive_box(backend, *association);
     if (terms.box.empty()) terms.box = PixelBox{0, 0, 1, 1};  // no term at all; one pixel, q = 0
@@ -194,8 +214,8 @@ SdfAlignmentTerms<S, Store> sdf_alignment_in_box(const TsdfVolume<S, B, Store>& 
 
 /// `terms` at coarse-to-fine level `level` of `params` (every
 /// (pixel_stride * 2^level)-th pixel).
-template <class S, class Store>
-SdfAlignmentTerms<S, Store> at_level(SdfAlignmentTerms<S, Store> terms, const SdfAlignmentParams<S>& params,
+template <class S, class Volume>
+SdfAlignmentTerms<S, Volume> at_level(SdfAlignmentTerms<S, Volume> terms, const SdfAlignmentParams<S>& params,
                                      int level) {
   terms.stride = params.pixel_stride << level;
   return terms;
@@ -226,13 +246,13 @@ SE3<S> coarse_to_fine(int levels, const SE3<S>& start, SolveReport* report, Solv
 /// Minimises the robust cost of `terms` with `solver` from `start`, coarse to
 /// fine over params.pyramid_levels levels (coarse_to_fine). `values` is
 /// reset for every level (the terms change with it).
-template <class S, Backend B, class Store, class Norm, class Solver>
+template <class S, Backend B, class Volume, class Norm, class Solver>
   requires RobustNorm<Norm, S> && PoseSolver<Solver, S>
-SE3<S> solve_coarse_to_fine(const B& backend, const SdfAlignmentTerms<S, Store>& terms, const Norm& norm,
+SE3<S> solve_coarse_to_fine(const B& backend, const SdfAlignmentTerms<S, Volume>& terms, const Norm& norm,
                             const SdfAlignmentParams<S>& params, const Solver& solver, const SE3<S>& start,
                             SolveReport* report, LinearizationCache<S, B>& values) {
   return coarse_to_fine(params.pyramid_levels, start, report, [&](int level, const SE3<S>& from, SolveReport& r) {
-    const SdfAlignmentTerms<S, Store> level_terms = at_level(terms, params, level);
+    const SdfAlignmentTerms<S, Volume> level_terms = at_level(terms, params, level);
     values.reset();
     const auto lin = [&](const SE3<S>& pose, const SE3<S>* reference) {
       return linearize(backend, level_terms, norm, pose, reference, values);
@@ -247,19 +267,19 @@ SE3<S> solve_coarse_to_fine(const B& backend, const SdfAlignmentTerms<S, Store>&
 /// poses is not higher at `candidate`, and at least as many terms are valid
 /// there (within 10 %: a pose that moves the points off the map loses terms,
 /// not cost). Two linearisations at the coarsest level.
-template <class S, Backend B, class Store, class Norm>
+template <class S, Backend B, class Volume, class Norm>
   requires RobustNorm<Norm, S>
-bool agrees_at_least_as_well(const B& backend, const SdfAlignmentTerms<S, Store>& terms, const Norm& norm,
+bool agrees_at_least_as_well(const B& backend, const SdfAlignmentTerms<S, Volume>& terms, const Norm& norm,
                              const SdfAlignmentParams<S>& params, const SE3<S>& candidate, const SE3<S>& fallback) {
-  const SdfAlignmentTerms<S, Store> coarse = at_level(terms, params, params.pyramid_levels - 1);
+  const SdfAlignmentTerms<S, Volume> coarse = at_level(terms, params, params.pyramid_levels - 1);
   const NormalEquations6 at_candidate = linearize(backend, coarse, norm, candidate, &fallback);
   const NormalEquations6 at_fallback = linearize(backend, coarse, norm, fallback);
   return at_candidate.shared_cost <= at_candidate.shared_reference_cost &&
          at_candidate.terms >= 0.9 * at_fallback.terms;
 }
 
-/// Minimises the robust SDF alignment cost over the camera pose in the
-/// volume's frame with `solver` (a PoseSolver: LevenbergMarquardt,
+/// Minimises the robust SDF alignment cost over the camera pose in the frame
+/// of `volume` (dense or sparse) with `solver` (a PoseSolver: LevenbergMarquardt,
 /// GaussNewton or the user's own), starting at `T_volume_camera`, coarse to
 /// fine when params.pyramid_levels > 1; returns the solved T_volume_camera.
 /// Use it when the volume's own pose is what is estimated (a moving object):
@@ -269,9 +289,9 @@ bool agrees_at_least_as_well(const B& backend, const SdfAlignmentTerms<S, Store>
 /// the solve's work runs on instead of the volume's, e.g. a CUDA stream of
 /// its own so that solves from several host threads overlap
 /// (ConcurrentLanes). Each solve needs its own cache.
-template <class S, Backend B, class Store, class Norm, class Solver>
-  requires RobustNorm<Norm, S> && PoseSolver<Solver, S>
-SE3<S> align_in_volume(const TsdfVolume<S, B, Store>& volume, const Image<Vec3<S>, B>& points,
+template <class S, Backend B, class Volume, class Norm, class Solver>
+  requires TsdfVolumeOn<Volume, S, B> && RobustNorm<Norm, S> && PoseSolver<Solver, S>
+SE3<S> align_in_volume(const Volume& volume, const Image<Vec3<S>, B>& points,
                        const Image<S, B>* association, const SE3<S>& T_volume_camera, const Norm& norm,
                        const SdfAlignmentParams<S>& params, const Solver& solver, SolveReport* report = nullptr,
                        LinearizationCache<S, B>* cache = nullptr, const B* run_on = nullptr) {
@@ -282,9 +302,9 @@ SE3<S> align_in_volume(const TsdfVolume<S, B, Store>& volume, const Image<Vec3<S
 }
 
 /// align_in_volume with Levenberg-Marquardt of parameters `lm`.
-template <class S, Backend B, class Store, class Norm>
-  requires RobustNorm<Norm, S>
-SE3<S> align_in_volume(const TsdfVolume<S, B, Store>& volume, const Image<Vec3<S>, B>& points,
+template <class S, Backend B, class Volume, class Norm>
+  requires TsdfVolumeOn<Volume, S, B> && RobustNorm<Norm, S>
+SE3<S> align_in_volume(const Volume& volume, const Image<Vec3<S>, B>& points,
                        const Image<S, B>* association, const SE3<S>& T_volume_camera, const Norm& norm,
                        const SdfAlignmentParams<S>& params = {}, const LevenbergMarquardtParams& lm = {},
                        SolveReport* report = nullptr, LinearizationCache<S, B>* cache = nullptr,
@@ -293,11 +313,11 @@ SE3<S> align_in_volume(const TsdfVolume<S, B, Store>& volume, const Image<Vec3<S
                          cache, run_on);
 }
 
-/// Tracks a camera against a volume: minimises the robust SDF alignment cost
+/// Tracks a camera against a volume (dense or sparse): minimises the robust SDF alignment cost
 /// over T_world_camera with `solver`, starting at `T_world_camera`.
-template <class S, Backend B, class Store, class Norm, class Solver>
-  requires RobustNorm<Norm, S> && PoseSolver<Solver, S>
-SE3<S> align_to_volume(const TsdfVolume<S, B, Store>& volume, const Image<Vec3<S>, B>& points,
+template <class S, Backend B, class Volume, class Norm, class Solver>
+  requires TsdfVolumeOn<Volume, S, B> && RobustNorm<Norm, S> && PoseSolver<Solver, S>
+SE3<S> align_to_volume(const Volume& volume, const Image<Vec3<S>, B>& points,
                        const Image<S, B>* association, const SE3<S>& T_world_camera, const Norm& norm,
                        const SdfAlignmentParams<S>& params, const Solver& solver, SolveReport* report = nullptr,
                        LinearizationCache<S, B>* cache = nullptr) {
@@ -306,9 +326,9 @@ SE3<S> align_to_volume(const TsdfVolume<S, B, Store>& volume, const Image<Vec3<S
 }
 
 /// align_to_volume with Levenberg-Marquardt of parameters `lm`.
-template <class S, Backend B, class Store, class Norm>
-  requires RobustNorm<Norm, S>
-SE3<S> align_to_volume(const TsdfVolume<S, B, Store>& volume, const Image<Vec3<S>, B>& points,
+template <class S, Backend B, class Volume, class Norm>
+  requires TsdfVolumeOn<Volume, S, B> && RobustNorm<Norm, S>
+SE3<S> align_to_volume(const Volume& volume, const Image<Vec3<S>, B>& points,
                        const Image<S, B>* association, const SE3<S>& T_world_camera, const Norm& norm,
                        const SdfAlignmentParams<S>& params = {}, const LevenbergMarquardtParams& lm = {},
                        SolveReport* report = nullptr, LinearizationCache<S, B>* cache = nullptr) {
