@@ -1,6 +1,12 @@
 // Raycasting a TSDF volume into a camera: per pixel, the first zero crossing
 // (outside to inside) of the SDF along the pixel's ray gives depth, a
-// camera-frame vertex, a camera-frame normal and a hit flag.
+// camera-frame vertex, a camera-frame normal and a hit flag. Written once for
+// any volume whose view is a TsdfSampler (volume_view.hpp): the dense
+// TsdfVolume and the SparseTsdfVolume. What differs between them is two small
+// overloaded helpers: the range of a ray inside the volume (the dense box,
+// or the box of the allocated blocks) and the step over unobserved space
+// (a truncation, or on the sparse volume straight to the next allocated block
+// when the ray is in an unallocated one).
 //
 // March steps follow the reference implementation: the truncation distance
 // while the SDF is truncated, then one voxel, then half a voxel once |sdf|
@@ -13,10 +19,12 @@
 // Object volumes pass their foreground counts: a crossing counts only where
 // the foreground probability exceeds `min_foreground` (paper sec. 3.5), so
 // that surfaces fused into an object's box but not belonging to it (the
-// table under a cup) are not drawn; the ray then marches on.
+// table under a cup) are not drawn; the ray then marches on. Foreground
+// counts are per voxel of a dense grid: only dense volumes take them.
 #pragma once
 
 #include <cmath>
+#include <concepts>
 #include <cstdint>
 #include <limits>
 
@@ -25,7 +33,9 @@
 #include "emfusion/core/parallel.hpp"
 #include "emfusion/core/se3.hpp"
 #include "emfusion/volume/foreground.hpp"
+#include "emfusion/volume/sparse_tsdf_volume.hpp"
 #include "emfusion/volume/tsdf_volume.hpp"
+#include "emfusion/volume/volume_view.hpp"
 
 namespace emfusion {
 
@@ -77,9 +87,63 @@ EMF_HD bool clip_ray_to_box(const Vec3<S>& o, const Vec3<S>& d, const Vec3<S>& l
   return t_in <= t_out;
 }
 
+// ---- the per-volume parts of the march ---------------------------------------
+
+/// Dense: the part of the ray inside the grid, half a voxel in from its
+/// faces (samples need the eight voxel centres around them).
 template <class S, class Store>
+EMF_HD bool ray_range(const TsdfView<S, Store>& volume, const Vec3<S>& origin, const Vec3<S>& dir, S& t, S& t_end) {
+  const S half = S(0.5) * volume.voxel_size;
+  return clip_ray_to_box(origin, dir, Vec3<S>::constant(half), volume.extent() - Vec3<S>::constant(half), t, t_end);
+}
+
+/// Dense: where the march goes on from an unobserved sample at t.
+template <class S, class Store>
+EMF_HD S skip_unobserved(const TsdfView<S, Store>& volume, const Vec3<S>&, const Vec3<S>&, S t, S) {
+  return t + volume.truncation;
+}
+
+/// Sparse: the part of the ray inside the box of the allocated blocks
+/// (outside it, fewer than half of the weights around a point are in an
+/// allocated block, so no sample there counts as observed).
+template <class S, class Store>
+EMF_HD bool ray_range(const SparseTsdfView<S, Store>& volume, const Vec3<S>& origin, const Vec3<S>& dir, S& t,
+                      S& t_end) {
+  Vec3<S> lo, hi;
+  return volume.block_box(lo, hi) && clip_ray_to_box(origin, dir, lo, hi, t, t_end);
+}
+
+/// Sparse: in an unallocated block, straight to where the ray enters the
+/// next allocated one (a hundredth of a voxel in, so that the first sample
+/// there is inside it); in an allocated block, a truncation as on the dense
+/// volume.
+template <class S, class Store>
+EMF_HD S skip_unobserved(const SparseTsdfView<S, Store>& volume, const Vec3<S>& origin, const Vec3<S>& dir, S t,
+                         S t_end) {
+  if (volume.skip_unallocated(origin, dir, t, t_end)) return t + S(0.01) * volume.voxel_size;
+  return t + volume.truncation;
+}
+
+/// Dense volumes check that their object's foreground counts have their grid.
+template <class S, Backend B, class Store>
+void check_foreground(const TsdfVolume<S, B, Store>& volume, const ForegroundCounts<S, B>& foreground) {
+  detail::require(foreground.dims()[0] == volume.dims()[0] && foreground.dims()[1] == volume.dims()[1] &&
+                      foreground.dims()[2] == volume.dims()[2],
+                  "raycast", "foreground counts and volume differ in size");
+}
+
+/// The sparse volume has no foreground counts (objects are dense).
+template <class S, Backend B, class Store>
+void check_foreground(const SparseTsdfVolume<S, B, Store>&, const ForegroundCounts<S, B>&) {
+  detail::require(false, "raycast",
+                  "foreground counts are per voxel of a dense TsdfVolume; a SparseTsdfVolume takes none (pass nullptr)");
+}
+
+// ---- the march, written once -------------------------------------------------
+
+template <class S, class View>
 struct RaycastPixel {
-  TsdfView<S, const Store> volume;
+  View volume;
   PinholeCamera<S> camera;
   SE3<S> T_volume_camera;
   RaycastParams<S> params;
@@ -107,11 +171,9 @@ struct RaycastPixel {
     const Vec3<S> ray_cam = normalized(camera.ray(S(u), S(v)));  // z = cos of the off-axis angle
     const Vec3<S> origin = T_volume_camera.translation();
     const Vec3<S> dir = T_volume_camera.rotate(ray_cam);
-    // Samples need the 8 voxel centres around them: stay half a voxel inside.
-    const S half = S(0.5) * volume.voxel_size;
     const S end_depth = !ray_end.empty() && ray_end[i] < params.max_depth ? ray_end[i] : params.max_depth;
     S t = params.min_depth / ray_cam.z(), t_end = end_depth / ray_cam.z();
-    if (!clip_ray_to_box(origin, dir, Vec3<S>::constant(half), volume.extent() - Vec3<S>::constant(half), t, t_end)) {
+    if (!ray_range(volume, origin, dir, t, t_end)) {
       miss(i);
       return;
     }
@@ -125,7 +187,7 @@ struct RaycastPixel {
       S f;
       if (!volume.sample_observed(origin + t * dir, f)) {
         have_prev = false;  // unobserved space: no crossing can be trusted
-        t += trunc;
+        t = skip_unobserved(volume, origin, dir, t, t_end);
         continue;
       }
       if (have_prev && f_prev > S(0) && f <= S(0)) {
@@ -182,33 +244,30 @@ struct RaycastPixel {
 
 }  // namespace detail
 
-/// Renders `volume` into `camera` at `T_world_camera`; writes into `out`
-/// (allocated on the volume's backend as needed). With `foreground` (an
-/// object's counts, same grid), only surfaces with p_fg > min_foreground.
-/// With `ray_end` (an image of the camera's size), rays are cast only where
-/// it is positive, and end at that depth: a pixel's first crossing before it
-/// or a miss (a question such as "is the surface in front of this depth?").
-template <class S, Backend B, class Store>
-void raycast(const TsdfVolume<S, B, Store>& volume, const PinholeCamera<S>& camera, const SE3<S>& T_world_camera,
+/// Renders `volume` (a TsdfVolume or a SparseTsdfVolume) into `camera` at
+/// `T_world_camera`; writes into `out` (allocated on the volume's backend as
+/// needed). With `foreground` (an object's counts, same grid; dense volumes
+/// only), only surfaces with p_fg > min_foreground. With `ray_end` (an image
+/// of the camera's size), rays are cast only where it is positive, and end at
+/// that depth: a pixel's first crossing before it or a miss (a question such
+/// as "is the surface in front of this depth?").
+template <class Volume, class S, Backend B>
+  requires TsdfVolumeType<Volume, S> && std::same_as<typename Volume::backend_type, B>
+void raycast(const Volume& volume, const PinholeCamera<S>& camera, const SE3<S>& T_world_camera,
              RaycastResult<S, B>& out, const RaycastParams<S>& params = {},
              const ForegroundCounts<S, B>* foreground = nullptr, const Image<S, B>* ray_end = nullptr) {
   camera.validate("raycast");
   detail::require(params.min_depth >= S(0) && params.max_depth > params.min_depth, "raycast",
                   "need 0 <= min_depth < max_depth");
+  if (foreground) detail::check_foreground(volume, *foreground);
+  if (ray_end) detail::require_image(ray_end->view(), camera.width, camera.height, "raycast", "ray_end image");
   out.resize(camera.width, camera.height, volume.backend());
-  detail::RaycastPixel<S, Store> f{volume.view(),       camera,          volume.pose().inverse() * T_world_camera,
-                                   params,              out.depth.view(), out.vertices.view(),
-                                   out.normals.view(),  out.hit.view(),   {}, {}};
-  if (ray_end) {
-    detail::require_image(ray_end->view(), camera.width, camera.height, "raycast", "ray_end image");
-    f.ray_end = ray_end->view();
-  }
-  if (foreground) {
-    detail::require(foreground->dims()[0] == volume.dims()[0] && foreground->dims()[1] == volume.dims()[1] &&
-                        foreground->dims()[2] == volume.dims()[2],
-                    "raycast", "foreground counts and volume differ in size");
-    f.foreground = foreground->view();
-  }
+  detail::RaycastPixel<S, decltype(volume.view())> f{
+      volume.view(),      camera,         volume.pose().inverse() * T_world_camera,
+      params,             out.depth.view(), out.vertices.view(),
+      out.normals.view(), out.hit.view(), {}, {}};
+  if (ray_end) f.ray_end = ray_end->view();
+  if (foreground) f.foreground = foreground->view();
   for_each_index(volume.backend(), camera.width * camera.height, f);
 }
 

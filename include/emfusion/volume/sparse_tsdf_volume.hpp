@@ -19,7 +19,9 @@
 // construction; voxel storage grows with the allocated blocks (doubling, at
 // most to the capacity). When the capacity is reached, allocation refuses the
 // new blocks that do not fit and counts them; stored blocks are never moved
-// or dropped. docs/volumes.md has the details.
+// or dropped. The volume keeps the box of its allocated blocks, and the view
+// skips unallocated blocks along a ray (skip_unallocated), for ray casting
+// (raycast.hpp). docs/volumes.md has the details.
 #pragma once
 
 #include <algorithm>
@@ -68,11 +70,16 @@ struct SparseTsdfView {
   int blocks = 0;                                  ///< allocated blocks
   S voxel_size = S(0);
   S truncation = S(0);
+  /// The box of block coordinates around every allocated block, inclusive
+  /// (block_lo > block_hi when none is): where rays may find anything.
+  Vec3i block_lo{{0, 0, 0}};
+  Vec3i block_hi{{-1, -1, -1}};
 
   /// A read-only view of the same volume (only for views of mutable voxels).
   template <class U = Store>
   requires(!std::is_const_v<U>) EMF_HD operator SparseTsdfView<S, const U>() const {
-    return {sdf, weight, slot_keys, slot_blocks, slot_mask, block_keys, blocks, voxel_size, truncation};
+    return {sdf,    weight,     slot_keys,  slot_blocks, slot_mask, block_keys,
+            blocks, voxel_size, truncation, block_lo,    block_hi};
   }
 
   /// Index of block (bx, by, bz) in the voxel storage, or -1 if it is not
@@ -117,6 +124,64 @@ struct SparseTsdfView {
   EMF_HD bool contains_point(const Vec3<S>& p) const {
     const S l = S(detail::sparse::voxel_limit - 2) * voxel_size;
     return p.x() >= -l && p.y() >= -l && p.z() >= -l && p.x() < l && p.y() < l && p.z() < l;
+  }
+
+  /// The volume-frame box [lo, hi] of the allocated blocks (block_lo,
+  /// block_hi in metres); false when no block is allocated.
+  EMF_HD bool block_box(Vec3<S>& lo, Vec3<S>& hi) const {
+    if (blocks <= 0 || block_hi[0] < block_lo[0] || block_hi[1] < block_lo[1] || block_hi[2] < block_lo[2])
+      return false;
+    const S side = S(block_side) * voxel_size;
+    lo = vec3(S(block_lo[0]) * side, S(block_lo[1]) * side, S(block_lo[2]) * side);
+    hi = vec3(S(block_hi[0] + 1) * side, S(block_hi[1] + 1) * side, S(block_hi[2] + 1) * side);
+    return true;
+  }
+
+  /// Empty-space skipping along the ray o + t d (volume frame, d of any
+  /// length but not zero). If the block at o + t d is allocated, returns
+  /// false and leaves t alone. Otherwise walks the blocks the ray passes
+  /// through (a 3D digital differential analyser, one table lookup per
+  /// block) and returns true with t at the distance where the ray enters the
+  /// first allocated block, or beyond t_end when there is none before it.
+  EMF_HD bool skip_unallocated(const Vec3<S>& o, const Vec3<S>& d, S& t, S t_end) const {
+    const S side = S(block_side) * voxel_size;
+    const Vec3<S> p = o + t * d;
+    int b[3];
+    for (int a = 0; a < 3; ++a) {
+      const S g = p[a] / side;
+      // Written so that NaN fails too; out of range counts as allocated (no skip).
+      if (!(g >= -S(detail::sparse::block_limit) && g < S(detail::sparse::block_limit))) return false;
+      b[a] = int(std::floor(g));
+    }
+    if (find_block(b[0], b[1], b[2]) >= 0) return false;
+    const S huge = std::numeric_limits<S>::max();
+    S t_next[3], t_delta[3];
+    int step[3];
+    for (int a = 0; a < 3; ++a) {
+      if (d[a] > S(0)) {
+        step[a] = 1, t_next[a] = t + (S(b[a] + 1) * side - p[a]) / d[a], t_delta[a] = side / d[a];
+      } else if (d[a] < S(0)) {
+        step[a] = -1, t_next[a] = t + (S(b[a]) * side - p[a]) / d[a], t_delta[a] = -side / d[a];
+      } else {
+        step[a] = 0, t_next[a] = huge, t_delta[a] = huge;
+      }
+    }
+    // Each axis crosses at most (t_end - t) |d_a| / side + 1 block borders.
+    const S span = (t_end - t) * (std::fabs(d[0]) + std::fabs(d[1]) + std::fabs(d[2])) / side;
+    const int max_blocks = span < S(1 << 24) ? int(span) + 4 : (1 << 24);
+    for (int k = 0; k < max_blocks; ++k) {
+      const int a = t_next[0] <= t_next[1] ? (t_next[0] <= t_next[2] ? 0 : 2) : (t_next[1] <= t_next[2] ? 1 : 2);
+      const S t_cross = t_next[a];
+      if (!(t_cross <= t_end)) break;
+      b[a] += step[a];
+      t_next[a] += t_delta[a];
+      if (find_block(b[0], b[1], b[2]) >= 0) {
+        t = t_cross > t ? t_cross : t;
+        return true;
+      }
+    }
+    t = t_end + side;
+    return true;
   }
 
   /// Trilinear SDF at volume-frame point p. Returns false (and leaves the
@@ -331,6 +396,7 @@ class SparseTsdfVolume {
     thrust::fill(backend_.policy(), sdf_.begin(), sdf_.end(), Store(params_.truncation));
     thrust::fill(backend_.policy(), weight_.begin(), weight_.end(), Store(0));
     allocated_ = 0;
+    box_ = detail::sparse::BlockBox{};
   }
 
   const SparseVolumeParams<S>& params() const { return params_; }
@@ -344,6 +410,11 @@ class SparseTsdfVolume {
   /// Most blocks the volume holds.
   int capacity() const { return params_.block_capacity; }
   int allocated_blocks() const { return allocated_; }
+  /// Block coordinates of the box around every allocated block, inclusive;
+  /// min > max on some axis when no block is allocated. Kept up to date by
+  /// allocation and reset(); ray casting clips its rays to it.
+  Vec3i block_min() const { return Vec3i{{box_.lo[0], box_.lo[1], box_.lo[2]}}; }
+  Vec3i block_max() const { return Vec3i{{box_.hi[0], box_.hi[1], box_.hi[2]}}; }
   /// Voxels in allocated blocks.
   std::int64_t voxel_count() const { return std::int64_t(allocated_) * block_voxels; }
   /// Bytes reserved now: the hash table, the block keys and the voxel
@@ -384,6 +455,7 @@ class SparseTsdfVolume {
     thrust::copy(sdf_.begin(), sdf_.begin() + voxels, out.sdf_.begin());
     thrust::copy(weight_.begin(), weight_.begin() + voxels, out.weight_.begin());
     out.allocated_ = allocated_;
+    out.box_ = box_;
     return out;
   }
 
@@ -418,6 +490,9 @@ class SparseTsdfVolume {
         detail::sparse::InsertBlock{thrust::raw_pointer_cast(keys.data()), raw(slot_keys_), raw(slot_blocks_),
                                     Key(slot_keys_.size() - 1), raw(block_keys_), allocated_});
     allocated_ += inserted;
+    box_ = box_.merged(transform_reduce_index(backend_, inserted,
+                                              detail::sparse::BoxOfKey{thrust::raw_pointer_cast(keys.data())},
+                                              detail::sparse::BlockBox{}, detail::sparse::MergeBoxes{}));
     return result;
   }
 
@@ -456,6 +531,7 @@ class SparseTsdfVolume {
     v.slot_mask = Key(slot_keys_.size() - 1);
     v.block_keys = raw(block_keys_), v.blocks = allocated_;
     v.voxel_size = params_.voxel_size, v.truncation = params_.truncation;
+    v.block_lo = block_min(), v.block_hi = block_max();
     return v;
   }
   // No pointer into an empty vector: thrust forms it by dereferencing null.
@@ -479,6 +555,7 @@ class SparseTsdfVolume {
   typename B::template Vector<Store> sdf_;        // voxel storage, 512 per block
   typename B::template Vector<Store> weight_;
   int allocated_ = 0;
+  detail::sparse::BlockBox box_;  // around the allocated blocks
 };
 
 /// Scratch memory of sparse allocation and integration; pass one to reuse it

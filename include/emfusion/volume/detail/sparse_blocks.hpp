@@ -96,4 +96,35 @@ EMF_HD inline bool insert_block(Key* slot_keys, int* slot_blocks, Key slot_mask,
 /// Offset of voxel (lx, ly, lz) (0..7 each) inside its block: x fastest.
 EMF_HD inline int local_index(int lx, int ly, int lz) { return (lz * block_side + ly) * block_side + lx; }
 
+/// An axis-aligned box of block coordinates, inclusive; empty (lo > hi) by
+/// default. The volume keeps the one around its allocated blocks.
+struct BlockBox {
+  int lo[3] = {block_limit, block_limit, block_limit};
+  int hi[3] = {-block_limit - 1, -block_limit - 1, -block_limit - 1};
+
+  EMF_HD BlockBox merged(const BlockBox& other) const {
+    BlockBox r;
+    for (int a = 0; a < 3; ++a) {
+      r.lo[a] = lo[a] < other.lo[a] ? lo[a] : other.lo[a];
+      r.hi[a] = hi[a] > other.hi[a] ? hi[a] : other.hi[a];
+    }
+    return r;
+  }
+};
+
+/// The box of the one block of keys[i].
+struct BoxOfKey {
+  const Key* keys;
+  EMF_HD BlockBox operator()(std::int64_t i) const {
+    BlockBox box;
+    unpack_key(keys[i], box.lo[0], box.lo[1], box.lo[2]);
+    for (int a = 0; a < 3; ++a) box.hi[a] = box.lo[a];
+    return box;
+  }
+};
+
+struct MergeBoxes {
+  EMF_HD BlockBox operator()(const BlockBox& a, const BlockBox& b) const { return a.merged(b); }
+};
+
 }  // namespace emfusion::detail::sparse
