@@ -154,7 +154,7 @@ struct FillCountsOf {
 }  // namespace
 
 TEMPLATE_LIST_TEST_CASE("Sparse volume where the voxels agree with the dense one: the same terms, the same E-step",
-                        "[solve][likelihood][sparse]", emfusion::test::AllConfigs) {
+                        "[solve][likelihood][sparse]", emfusion::test::HeavyConfigs) {
   using S = typename TestType::Scalar;
   using B = typename TestType::Backend;
   const RoomFrames<S, B> frames;
@@ -286,7 +286,7 @@ TEMPLATE_LIST_TEST_CASE("Sparse volume where the voxels agree with the dense one
 }
 
 TEMPLATE_LIST_TEST_CASE("Sparse map: a known camera motion recovered as accurately as dense, also coarse to fine",
-                        "[solve][sparse]", emfusion::test::AllConfigs) {
+                        "[solve][sparse]", emfusion::test::HeavyConfigs) {
   using S = typename TestType::Scalar;
   using B = typename TestType::Backend;
   // The sparse map as a mapping loop makes it: blocks allocated as the

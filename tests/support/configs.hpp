@@ -31,6 +31,18 @@ using SystemRuleConfigs = std::tuple<Config<float, Host>, Config<float, Cuda>>;
 using SystemRuleConfigs = std::tuple<Config<float, Host>>;
 #endif
 
+/// The long sparse-volume tests (tests/volume/test_sparse_*.cpp,
+/// tests/solve/test_sparse_alignment.cpp): every config, but float only in
+/// the sanitizer build (EMFUSION_SANITIZER_BUILD). The double instantiation
+/// checks arithmetic, which the release build runs; memory and undefined
+/// behaviour show in the float instantiation of the same code, at half the
+/// sanitizer build's compile and run time.
+#if EMFUSION_SANITIZER_BUILD && !EMFUSION_HAS_CUDA
+using HeavyConfigs = std::tuple<Config<float, Host>>;
+#else
+using HeavyConfigs = AllConfigs;
+#endif
+
 /// Tolerance helpers: float tests get looser bounds than double tests.
 template <class S>
 constexpr double eps_for() {

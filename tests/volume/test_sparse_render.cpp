@@ -245,7 +245,7 @@ double value_tolerance() {
 
 // One fusion, two checks (it is what costs): ray casting, then marching cubes.
 TEMPLATE_LIST_TEST_CASE("Sparse raycast and marching cubes: what the dense volume gives for the same voxels",
-                        "[volume]", emfusion::test::AllConfigs) {
+                        "[volume]", emfusion::test::HeavyConfigs) {
   using S = typename TestType::Scalar;
   using B = typename TestType::Backend;
   const FusedPair<S, B> pair;
@@ -357,7 +357,7 @@ TEMPLATE_LIST_TEST_CASE("Sparse raycast and marching cubes: what the dense volum
 }
 
 TEMPLATE_LIST_TEST_CASE("Sparse raycast: rays through unallocated space miss and skip it", "[volume]",
-                        emfusion::test::AllConfigs) {
+                        emfusion::test::HeavyConfigs) {
   using S = typename TestType::Scalar;
   using B = typename TestType::Backend;
   // Two balls 2.4 m apart: the box of allocated blocks spans both, and the
@@ -427,7 +427,7 @@ TEMPLATE_LIST_TEST_CASE("Sparse raycast: rays through unallocated space miss and
   CHECK(std::count(after_reset.begin(), after_reset.end(), std::uint8_t(1)) == 0);
 }
 
-TEMPLATE_LIST_TEST_CASE("Sparse raycast of a scene 10 m from the origin", "[volume]", emfusion::test::AllConfigs) {
+TEMPLATE_LIST_TEST_CASE("Sparse raycast of a scene 10 m from the origin", "[volume]", emfusion::test::HeavyConfigs) {
   using S = typename TestType::Scalar;
   using B = typename TestType::Backend;
   const Vec3<S> offset = vec3(S(10), S(-4), S(6));
@@ -470,7 +470,7 @@ TEMPLATE_LIST_TEST_CASE("Sparse raycast of a scene 10 m from the origin", "[volu
 }
 
 TEMPLATE_LIST_TEST_CASE("Sparse marching cubes: a closed sphere across block borders, negative blocks included",
-                        "[volume]", emfusion::test::AllConfigs) {
+                        "[volume]", emfusion::test::HeavyConfigs) {
   using S = typename TestType::Scalar;
   using B = typename TestType::Backend;
   // A sphere around a point near the origin of the volume frame: its blocks
@@ -530,7 +530,7 @@ TEMPLATE_LIST_TEST_CASE("Sparse marching cubes: a closed sphere across block bor
 }
 
 TEMPLATE_LIST_TEST_CASE("Sparse raycast and marching cubes: empty volumes and bad inputs", "[volume]",
-                        emfusion::test::AllConfigs) {
+                        emfusion::test::HeavyConfigs) {
   using S = typename TestType::Scalar;
   using B = typename TestType::Backend;
   SparseTsdfVolume<S, B> sparse(S(0.01), S(0), SE3<S>::identity(), 64);

@@ -211,7 +211,7 @@ VoxelComparison compare_voxels(const TsdfVolume<S, Host, StoreD>& dense,
 }  // namespace
 
 TEMPLATE_LIST_TEST_CASE("Sparse volume: once allocated, voxels evolve exactly as the dense volume's", "[volume]",
-                        emfusion::test::AllConfigs) {
+                        emfusion::test::HeavyConfigs) {
   using S = typename TestType::Scalar;
   using B = typename TestType::Backend;
   const auto camera = test::small_camera<S>();
@@ -267,7 +267,7 @@ TEMPLATE_LIST_TEST_CASE("Sparse volume: once allocated, voxels evolve exactly as
 }
 
 TEMPLATE_LIST_TEST_CASE("Sparse volume fused frame by frame: a subset of the dense updates, accurate near surfaces",
-                        "[volume]", emfusion::test::AllConfigs) {
+                        "[volume]", emfusion::test::HeavyConfigs) {
   using S = typename TestType::Scalar;
   using B = typename TestType::Backend;
   const auto camera = test::small_camera<S>();
@@ -348,7 +348,7 @@ TEMPLATE_LIST_TEST_CASE("Sparse volume fused frame by frame: a subset of the den
 }
 
 TEMPLATE_LIST_TEST_CASE("Sparse volume of a room: a fraction of the dense cube's voxels", "[volume]",
-                        emfusion::test::AllConfigs) {
+                        emfusion::test::HeavyConfigs) {
   using S = typename TestType::Scalar;
   using B = typename TestType::Backend;
   const auto camera = test::room_camera<S>();
@@ -376,7 +376,7 @@ TEMPLATE_LIST_TEST_CASE("Sparse volume of a room: a fraction of the dense cube's
 }
 
 TEMPLATE_LIST_TEST_CASE("Sparse volume: a scene 10 m from the origin integrates and samples", "[volume]",
-                        emfusion::test::AllConfigs) {
+                        emfusion::test::HeavyConfigs) {
   using S = typename TestType::Scalar;
   using B = typename TestType::Backend;
   // The sphere and box moved by a whole number of voxels, outside any 5 m
@@ -457,7 +457,7 @@ TEMPLATE_LIST_TEST_CASE("Sparse volume: a scene 10 m from the origin integrates 
 }
 
 TEMPLATE_LIST_TEST_CASE("Sparse volume: a full table refuses blocks, counts them and keeps the stored ones", "[volume]",
-                        emfusion::test::AllConfigs) {
+                        emfusion::test::HeavyConfigs) {
   using S = typename TestType::Scalar;
   using B = typename TestType::Backend;
   const auto camera = test::small_camera<S>();
@@ -515,7 +515,7 @@ TEMPLATE_LIST_TEST_CASE("Sparse volume: a full table refuses blocks, counts them
   CHECK(integrate(sparse, frames[0], camera, poses[0]).allocation.inserted == capacity);
 }
 
-TEMPLATE_LIST_TEST_CASE("Sparse volume: hash collisions and repeated keys", "[volume]", emfusion::test::AllConfigs) {
+TEMPLATE_LIST_TEST_CASE("Sparse volume: hash collisions and repeated keys", "[volume]", emfusion::test::HeavyConfigs) {
   using S = typename TestType::Scalar;
   using B = typename TestType::Backend;
   // A line of blocks and a plane of blocks, with every key given twice.
@@ -567,7 +567,7 @@ TEMPLATE_LIST_TEST_CASE("Sparse volume: hash collisions and repeated keys", "[vo
 }
 
 TEMPLATE_LIST_TEST_CASE("Sparse allocation in parallel finds the blocks of a serial loop, in any frame order",
-                        "[volume]", emfusion::test::AllConfigs) {
+                        "[volume]", emfusion::test::HeavyConfigs) {
   using S = typename TestType::Scalar;
   using B = typename TestType::Backend;
   const auto camera = test::room_camera<S>();
@@ -622,7 +622,7 @@ TEMPLATE_LIST_TEST_CASE("Sparse allocation in parallel finds the blocks of a ser
 }
 
 TEMPLATE_LIST_TEST_CASE("Sparse volume: unallocated space reads as never observed", "[volume]",
-                        emfusion::test::AllConfigs) {
+                        emfusion::test::HeavyConfigs) {
   using S = typename TestType::Scalar;
   using B = typename TestType::Backend;
   SparseTsdfVolume<S, B> sparse(S(0.01), S(0.05), SE3<S>::identity(), 16);
@@ -652,7 +652,7 @@ TEMPLATE_LIST_TEST_CASE("Sparse volume: unallocated space reads as never observe
   CHECK(view.find_block(detail::sparse::block_limit, 0, 0) < 0);  // out of range, not a wrapped key
 }
 
-TEMPLATE_LIST_TEST_CASE("Sparse volume: bad parameters throw clear errors", "[volume]", emfusion::test::AllConfigs) {
+TEMPLATE_LIST_TEST_CASE("Sparse volume: bad parameters throw clear errors", "[volume]", emfusion::test::HeavyConfigs) {
   using S = typename TestType::Scalar;
   using B = typename TestType::Backend;
   using V = SparseTsdfVolume<S, B>;
@@ -681,7 +681,7 @@ TEMPLATE_LIST_TEST_CASE("Sparse volume: bad parameters throw clear errors", "[vo
 }
 
 TEMPLATE_LIST_TEST_CASE("Sparse volume with half storage follows the float one", "[volume]",
-                        emfusion::test::AllConfigs) {
+                        emfusion::test::HeavyConfigs) {
   using S = typename TestType::Scalar;
   using B = typename TestType::Backend;
   if constexpr (std::is_same_v<S, float>) {

@@ -145,9 +145,17 @@ struct SdfAlignmentTerms {
     const Vec3<S> x = T_volume_camera * p;
     Vec3<S> g;
     S W;
-    // The view itself, or for a sparse one a sampler that looks each block
-    // up once for the term's samples (solve/nearby_samples.hpp).
+    // The view itself, or on the host for a sparse one a sampler that looks
+    // each block up once for the term's samples (solve/nearby_samples.hpp).
+    // Not on a CUDA device: there the cache's arrays live in local memory and
+    // cost more than the lookups they save (H200, redkitchen_300, track_camera
+    // --volume sparse: 8.2 ms per frame with the cache, 2.8 ms without;
+    // docs/volumes.md).
+#if defined(__CUDA_ARCH__)
+    const auto& sampler = volume;
+#else
     auto&& sampler = nearby_sampler(volume);
+#endif
     if (!sampler.sample_with_gradient(x, r, g, &W)) return false;
     if (central_gradient && !sampler.central_gradient(x, g)) return false;
     if (confidence_scale > S(0)) q *= (W * confidence_scale < S(1) ? W * confidence_scale : S(1));
