@@ -371,6 +371,26 @@ struct DynamicSceneParams {
   DepthNoise noise{};
 };
 
+namespace detail {
+
+/// Checks what every generated scene takes from `params` (objects in
+/// 0..max_objects, frames, image size, noise) and returns its camera:
+/// f = 525 * width / 640, the principal point at the image centre.
+inline PinholeCamera<double> scene_camera(const DynamicSceneParams& params, int max_objects, const char* where) {
+  emfusion::detail::require(params.moving_objects >= 0 && params.moving_objects <= max_objects, where,
+                            "moving_objects must be in 0.." + std::to_string(max_objects) + ", got " +
+                                std::to_string(params.moving_objects));
+  emfusion::detail::require(params.frames >= 1, where, "frames must be >= 1, got " + std::to_string(params.frames));
+  emfusion::detail::require(
+      params.width >= 16 && params.height >= 16, where,
+      "image size must be at least 16x16, got " + std::to_string(params.width) + "x" + std::to_string(params.height));
+  params.noise.validate(where);
+  const double f = 525.0 * params.width / 640.0;
+  return {f, f, (params.width - 1) / 2.0, (params.height - 1) / 2.0, params.width, params.height};
+}
+
+}  // namespace detail
+
 namespace detail::room {
 
 constexpr double fps = 30;
@@ -779,20 +799,10 @@ inline std::vector<ObjectPlan> plan_objects(int count, int frames, std::uint64_t
 template <class S>
 DynamicScene<S> make_dynamic_room(const DynamicSceneParams& params = {}) {
   const char* where = "make_dynamic_room";
-  emfusion::detail::require(params.moving_objects >= 0 && params.moving_objects <= 8, where,
-                            "moving_objects must be in 0..8, got " + std::to_string(params.moving_objects));
   emfusion::detail::require(
       params.camera_path == CameraPath::hand_held || params.camera_path == CameraPath::hand_held_fast, where,
       "camera_path must be hand_held or hand_held_fast, got " + std::to_string(int(params.camera_path)));
-  emfusion::detail::require(params.frames >= 1, where, "frames must be >= 1, got " + std::to_string(params.frames));
-  emfusion::detail::require(
-      params.width >= 16 && params.height >= 16, where,
-      "image size must be at least 16x16, got " + std::to_string(params.width) + "x" + std::to_string(params.height));
-  params.noise.validate(where);
-
-  const double f = 525.0 * params.width / 640.0;
-  const PinholeCamera<double> camera{
-      f, f, (params.width - 1) / 2.0, (params.height - 1) / 2.0, params.width, params.height};
+  const PinholeCamera<double> camera = detail::scene_camera(params, 8, where);
   std::vector<SE3<double>> T_world_camera, T_camera_world;
   const bool fast = params.camera_path == CameraPath::hand_held_fast;
   const detail::room::FastPath fast_path =
@@ -966,17 +976,7 @@ inline room::ObjectPlan plan_object(int k, int frames, std::uint64_t seed, doubl
 /// params.camera_path is not used.
 template <class S>
 DynamicScene<S> make_dynamic_corridor(const DynamicSceneParams& params = {}) {
-  const char* where = "make_dynamic_corridor";
-  emfusion::detail::require(params.moving_objects >= 0 && params.moving_objects <= 6, where,
-                            "moving_objects must be in 0..6, got " + std::to_string(params.moving_objects));
-  emfusion::detail::require(params.frames >= 1, where, "frames must be >= 1, got " + std::to_string(params.frames));
-  emfusion::detail::require(
-      params.width >= 16 && params.height >= 16, where,
-      "image size must be at least 16x16, got " + std::to_string(params.width) + "x" + std::to_string(params.height));
-  params.noise.validate(where);
-  const double f = 525.0 * params.width / 640.0;
-  const PinholeCamera<double> camera{
-      f, f, (params.width - 1) / 2.0, (params.height - 1) / 2.0, params.width, params.height};
+  const PinholeCamera<double> camera = detail::scene_camera(params, 6, "make_dynamic_corridor");
   const double duration = (params.frames - 1) / detail::corridor::fps;
   std::vector<SE3<double>> T_world_camera;
   for (int i = 0; i < params.frames; ++i)

@@ -14,6 +14,7 @@
 #include "emfusion/core/host_device.hpp"
 #include "emfusion/core/math.hpp"
 #include "emfusion/volume/detail/sparse_blocks.hpp"
+#include "emfusion/volume/detail/trilinear.hpp"
 #include "emfusion/volume/sparse_tsdf_volume.hpp"
 
 namespace emfusion {
@@ -65,30 +66,13 @@ struct NearbySparseSampler {
     if (!load(c, v, w)) return false;
     sdf_out = interpolate(v, c);
     if (weight_out) *weight_out = interpolate(w, c);
-    const S fx = c.fx, fy = c.fy, fz = c.fz;
-    // v index bits: 1 -> +x, 2 -> +y, 4 -> +z.
-    const S dx = ((v[1] - v[0]) * (1 - fy) + (v[3] - v[2]) * fy) * (1 - fz) +
-                 ((v[5] - v[4]) * (1 - fy) + (v[7] - v[6]) * fy) * fz;
-    const S dy = ((v[2] - v[0]) * (1 - fx) + (v[3] - v[1]) * fx) * (1 - fz) +
-                 ((v[6] - v[4]) * (1 - fx) + (v[7] - v[5]) * fx) * fz;
-    const S dz = ((v[4] - v[0]) * (1 - fx) + (v[5] - v[1]) * fx) * (1 - fy) +
-                 ((v[6] - v[2]) * (1 - fx) + (v[7] - v[3]) * fx) * fy;
-    gradient = vec3(dx, dy, dz) / view.voxel_size;
+    gradient = detail::trilinear::gradient(v, c.fx, c.fy, c.fz, view.voxel_size);
     return true;
   }
 
   /// SparseTsdfView::central_gradient.
   EMF_HD bool central_gradient(const Vec3<S>& p, Vec3<S>& gradient) {
-    S plus, minus;
-    for (int a = 0; a < 3; ++a) {
-      Vec3<S> q = p;
-      q[a] += view.voxel_size;
-      if (!sample(q, plus)) return false;
-      q[a] -= S(2) * view.voxel_size;
-      if (!sample(q, minus)) return false;
-      gradient[a] = (plus - minus) / (S(2) * view.voxel_size);
-    }
-    return true;
+    return detail::trilinear::central_gradient(*this, p, view.voxel_size, gradient);
   }
 
  private:
@@ -143,10 +127,7 @@ struct NearbySparseSampler {
     return true;
   }
   EMF_HD static S interpolate(const S* v, const Corner& c) {
-    const S x00 = v[0] + (v[1] - v[0]) * c.fx, x10 = v[2] + (v[3] - v[2]) * c.fx;
-    const S x01 = v[4] + (v[5] - v[4]) * c.fx, x11 = v[6] + (v[7] - v[6]) * c.fx;
-    const S y0 = x00 + (x10 - x00) * c.fy, y1 = x01 + (x11 - x01) * c.fy;
-    return y0 + (y1 - y0) * c.fz;
+    return detail::trilinear::interpolate(v, c.fx, c.fy, c.fz);
   }
 };
 

@@ -24,6 +24,7 @@
 #include "emfusion/core/host_device.hpp"
 #include "emfusion/core/math.hpp"
 #include "emfusion/core/se3.hpp"
+#include "emfusion/volume/detail/trilinear.hpp"
 
 namespace emfusion {
 
@@ -85,37 +86,18 @@ struct TsdfView {
   EMF_HD bool sample_observed(const Vec3<S>& p, S& sdf_out, S min_coverage = S(0.5)) const {
     Corner c;
     if (!corner(p, c)) return false;
-    S sum = S(0), covered = S(0);
+    S v[8], w[8];
     for (int k = 0; k < 8; ++k) {
       const std::int64_t i = index(c.x + (k & 1), c.y + ((k >> 1) & 1), c.z + ((k >> 2) & 1));
-      if (!(S(weight[i]) > S(0))) continue;
-      const S a = ((k & 1) ? c.fx : S(1) - c.fx) * ((k & 2) ? c.fy : S(1) - c.fy) * ((k & 4) ? c.fz : S(1) - c.fz);
-      sum += a * S(sdf[i]);
-      covered += a;
+      v[k] = S(sdf[i]), w[k] = S(weight[i]);
     }
-    if (!(covered >= min_coverage) || !(covered > S(0))) return false;
-    sdf_out = sum / covered;
-    return true;
+    return detail::trilinear::interpolate_observed(v, w, c.fx, c.fy, c.fz, min_coverage, sdf_out);
   }
 
   /// Central differences one voxel apart of `sample_observed`, one-sided
   /// where one side is not observed: the normals of what rendering draws.
   EMF_HD bool observed_gradient(const Vec3<S>& p, Vec3<S>& gradient) const {
-    S centre = S(0);
-    const bool has_centre = sample_observed(p, centre);
-    for (int a = 0; a < 3; ++a) {
-      Vec3<S> q = p;
-      S plus = S(0), minus = S(0);
-      q[a] = p[a] + voxel_size;
-      const bool has_plus = sample_observed(q, plus);
-      q[a] = p[a] - voxel_size;
-      const bool has_minus = sample_observed(q, minus);
-      if (has_plus && has_minus) gradient[a] = (plus - minus) / (S(2) * voxel_size);
-      else if (has_plus && has_centre) gradient[a] = (plus - centre) / voxel_size;
-      else if (has_minus && has_centre) gradient[a] = (centre - minus) / voxel_size;
-      else return false;
-    }
-    return true;
+    return detail::trilinear::observed_gradient(*this, p, voxel_size, gradient);
   }
 
   /// Trilinear SDF and its exact gradient (of the trilinear interpolant) at p.
@@ -126,31 +108,14 @@ struct TsdfView {
     if (!load(c, v, w)) return false;
     sdf_out = interpolate(v, c);
     if (weight_out) *weight_out = interpolate(w, c);
-    const S fx = c.fx, fy = c.fy, fz = c.fz;
-    // v index bits: 1 -> +x, 2 -> +y, 4 -> +z.
-    const S dx = ((v[1] - v[0]) * (1 - fy) + (v[3] - v[2]) * fy) * (1 - fz) +
-                 ((v[5] - v[4]) * (1 - fy) + (v[7] - v[6]) * fy) * fz;
-    const S dy = ((v[2] - v[0]) * (1 - fx) + (v[3] - v[1]) * fx) * (1 - fz) +
-                 ((v[6] - v[4]) * (1 - fx) + (v[7] - v[5]) * fx) * fz;
-    const S dz = ((v[4] - v[0]) * (1 - fx) + (v[5] - v[1]) * fx) * (1 - fy) +
-                 ((v[6] - v[2]) * (1 - fx) + (v[7] - v[3]) * fx) * fy;
-    gradient = vec3(dx, dy, dz) / voxel_size;
+    gradient = detail::trilinear::gradient(v, c.fx, c.fy, c.fz, voxel_size);
     return true;
   }
 
   /// SDF gradient by central differences of trilinear samples one voxel
   /// apart: smoother than the trilinear gradient, used for surface normals.
   EMF_HD bool central_gradient(const Vec3<S>& p, Vec3<S>& gradient) const {
-    S plus, minus;
-    for (int a = 0; a < 3; ++a) {
-      Vec3<S> q = p;
-      q[a] += voxel_size;
-      if (!sample(q, plus)) return false;
-      q[a] -= S(2) * voxel_size;
-      if (!sample(q, minus)) return false;
-      gradient[a] = (plus - minus) / (S(2) * voxel_size);
-    }
-    return true;
+    return detail::trilinear::central_gradient(*this, p, voxel_size, gradient);
   }
 
  private:
@@ -177,11 +142,9 @@ struct TsdfView {
     return true;
   }
   EMF_HD static S interpolate(const S* v, const Corner& c) {
-    const S x00 = v[0] + (v[1] - v[0]) * c.fx, x10 = v[2] + (v[3] - v[2]) * c.fx;
-    const S x01 = v[4] + (v[5] - v[4]) * c.fx, x11 = v[6] + (v[7] - v[6]) * c.fx;
-    const S y0 = x00 + (x10 - x00) * c.fy, y1 = x01 + (x11 - x01) * c.fy;
-    return y0 + (y1 - y0) * c.fz;
+    return detail::trilinear::interpolate(v, c.fx, c.fy, c.fz);
   }
+
 };
 
 /// Size and placement of a volume.
