@@ -518,8 +518,9 @@ std::vector<FrameLogRow> resumed_frame_log(const std::string& resume, std::size_
 /// meshes/background.ply and meshes/object_<id>.ply of every live object.
 template <class B>
 void write_meshes(const fs::path& dir, const Map<S, B>& map) {
-  const auto& bg = map.background;
-  write_ply((dir / "background.ply").string(), transformed(marching_cubes(bg, S(0), S(1)), bg.pose()));
+  map.background.visit([&](const auto& bg) {
+    write_ply((dir / "background.ply").string(), transformed(marching_cubes(bg, S(0), S(1)), bg.pose()));
+  });
   for (const auto& obj : map.objects)
     write_ply((dir / ("object_" + std::to_string(obj->id()) + ".ply")).string(),
               transformed(marching_cubes(obj->volume(), S(0), S(1)), obj->T_object_volume()));
@@ -670,6 +671,12 @@ void run(const RunOptions& o) {
     json["last_timestamp"] = processed > 0 ? in.timestamp(processed - 1) : NAN;
   }
   json["objects_created"] = list.size();
+  // The models' memory as the run ended (the background's: what it holds,
+  // not its bound; docs/user-guide.md, "Outputs").
+  Json& memory = json["memory"] = Json::object();
+  memory["background"] = system.background().describe();
+  memory["background_bytes"] = system.background().memory_bytes();
+  memory["models_bytes"] = system.memory_bytes();
   settings(json);
   Json& timings = json["timings_ms"] = Json::object();
   const auto stage = [&](const char* name, double StageTimes::*field) {

@@ -27,9 +27,10 @@ std::string small_checkpoint() {
   p.background_voxel_size = S(0.1);
   Map<S> map(p);
   // A few observed voxels, so that the streams are not all alike.
-  std::vector<S> sdf = map.background.sdf_to_host(), weight = map.background.weight_to_host();
+  TsdfVolume<S, Host>& background = *map.background.dense();
+  std::vector<S> sdf = background.sdf_to_host(), weight = background.weight_to_host();
   for (int i = 0; i < 64; ++i) sdf[std::size_t(i)] = S(0.01) * S(i % 7), weight[std::size_t(i)] = S(1 + i % 3);
-  map.background.assign_from_host(sdf, weight);
+  background.assign_from_host(sdf, weight);
   for (int id : {1, 2}) {
     auto o = std::make_unique<ObjectModel<S>>(id, "cup", SE3<S>::translation(vec3(S(0.1) * S(id), S(0), S(1))), 4,
                                               S(0.02), S(3));

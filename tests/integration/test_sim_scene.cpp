@@ -87,7 +87,7 @@ std::vector<eval::ObjectEvaluation> evaluate(const sim::DynamicScene<float>& sce
 /// observed surface: |sdf| below 1.5 voxels and weight at least 1.
 template <class B>
 double background_trace(const sim::DynamicScene<float>& scene, const System<float, B>& system) {
-  const TsdfVolume<float, B>& bg = system.background();
+  const TsdfVolume<float, B>& bg = *system.background().dense();
   const std::vector<float> sdf = bg.sdf_to_host(), weight = bg.weight_to_host();
   const Vec3i dims = bg.dims();
   const TsdfView<float, const float> view{sdf.data(), weight.data(), dims[0], dims[1], dims[2], bg.voxel_size(),

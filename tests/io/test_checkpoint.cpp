@@ -151,8 +151,8 @@ TEMPLATE_LIST_TEST_CASE("Checkpoints: a loaded map meshes without the sequence",
   for (int i = 0; i < 2; ++i) scene.template feed<B>(system, i);
   save_checkpoint(dir.file("a.emfckpt"), system);
   const Checkpoint<S, B> ck = load_checkpoint<S, B>(dir.file("a.emfckpt"));
-  const auto before = marching_cubes(system.background(), S(0), S(1));
-  const auto after = marching_cubes(ck.map.background, S(0), S(1));
+  const auto before = marching_cubes(*system.background().dense(), S(0), S(1));
+  const auto after = marching_cubes(*ck.map.background.dense(), S(0), S(1));
   CHECK(after.vertices.size() == before.vertices.size());
   CHECK(!after.vertices.empty());
   REQUIRE(ck.map.objects.size() == system.objects().size());

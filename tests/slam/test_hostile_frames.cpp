@@ -72,8 +72,8 @@ bool finite_pose(const SE3<S>& T) {
 /// Every stored value of the background: a frame that is not mapped leaves it bit for bit.
 template <class S, class B>
 std::vector<S> background_values(const System<S, B>& sys) {
-  std::vector<S> v = sys.background().sdf_to_host();
-  const std::vector<S> w = sys.background().weight_to_host();
+  std::vector<S> v = sys.background().dense()->sdf_to_host();
+  const std::vector<S> w = sys.background().dense()->weight_to_host();
   v.insert(v.end(), w.begin(), w.end());
   return v;
 }

@@ -117,7 +117,7 @@ TEMPLATE_LIST_TEST_CASE("Stages alone: preprocessing, first mapping and object c
   CHECK(m.map.next_id == 2);
   // The object sits on the box (1.2 m ahead), the background was fused.
   CHECK(std::abs(double(m.map.objects[0]->pose().translation().z()) - 1.2) < 0.12);
-  const TsdfVolume<S, Host> background = m.map.background.template to<Host>();
+  const TsdfVolume<S, Host> background = m.map.background.dense()->template to<Host>();
   S sdf = S(1);
   CHECK(background.view().sample(background.pose().inverse() * vec3(S(0.5), S(0.3), S(2)), sdf));
   CHECK(std::abs(double(sdf)) < 0.02);
@@ -623,7 +623,7 @@ TEMPLATE_LIST_TEST_CASE("Stages alone: tracking from a motion prediction, the re
   const auto norm_in_voxels = scaled_norm(HuberNorm<S>{S(2)}, m.map.background.voxel_size());
   for (const bool retry : {false, true}) {
     PoseTrack t;
-    track_in_volume(m.map.background, m.frame.points, &m.frame.associations.image(0), in_volume, norm_in_voxels,
+    track_in_volume(*m.map.background.dense(), m.frame.points, &m.frame.associations.image(0), in_volume, norm_in_voxels,
                     align, LevenbergMarquardt{}, retry, fail_from_prediction, t, cache, m.map.background.backend());
     CHECK(t.attempts == (retry ? 2 : 1));
     CHECK(t.from_prediction == !retry);

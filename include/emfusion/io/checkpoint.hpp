@@ -323,6 +323,8 @@ std::string grid_text(const TsdfVolume<S, B>& v) {
 template <class S, Backend B>
 std::string checkpoint_bytes(const Map<S, B>& map, const PinholeCamera<S>& camera) {
   static_assert(sizeof(S) == 4 || sizeof(S) == 8, "checkpoints hold float or double maps");
+  detail::require(map.background.dense() != nullptr, "save_checkpoint",
+                  "checkpoints hold a dense background only so far; this map's is sparse (sparse_background)");
   detail::checkpoint::Writer w;
   w.i32(camera.width);
   w.i32(camera.height);
@@ -345,7 +347,7 @@ std::string checkpoint_bytes(const Map<S, B>& map, const PinholeCamera<S>& camer
     w.u8(r.person ? 1 : 0);
     w.trajectory(r.trajectory);
   }
-  w.volume(map.background);
+  w.volume(*map.background.dense());
   w.u64(map.objects.size());
   for (const auto& o : map.objects) w.object(*o);
   w.u64(map.lost.size());
@@ -444,7 +446,7 @@ Checkpoint<S, B> parse_checkpoint(const std::string& data, const std::string& so
   small.background_voxels = 8;
   Checkpoint<S, B> out{camera, Map<S, B>(small, backend)};
   Map<S, B>& map = out.map;
-  map.background = std::move(background);
+  map.background = BackgroundVolume<S, B>(std::move(background));
   map.frames = frames, map.started = started, map.next_id = next_id;
   map.T_world_camera = T_world_camera;
   map.camera_trajectory = std::move(camera_trajectory);
@@ -504,11 +506,14 @@ void restore_checkpoint(System<S, B, L, BN, ON, Solver>& system, const std::stri
   if (ck.camera.width != c.width || ck.camera.height != c.height || ck.camera.fx != c.fx || ck.camera.fy != c.fy ||
       ck.camera.cx != c.cx || ck.camera.cy != c.cy)
     refuse("saved with camera " + detail::checkpoint::camera_text(ck.camera) + ", the system has " + detail::checkpoint::camera_text(c));
-  const TsdfVolume<S, B>& bg = system.background();
-  const Vec3i& d = ck.map.background.dims();
+  if (!system.background().dense())
+    refuse("it holds a dense background and the system's is sparse (sparse_background)");
+  const TsdfVolume<S, B>& bg = *system.background().dense();
+  const TsdfVolume<S, B>& saved = *ck.map.background.dense();
+  const Vec3i& d = saved.dims();
   if (d[0] != bg.dims()[0] || d[1] != bg.dims()[1] || d[2] != bg.dims()[2] ||
-      ck.map.background.voxel_size() != bg.voxel_size() || ck.map.background.truncation() != bg.truncation())
-    refuse("saved with a background of " + detail::checkpoint::grid_text(ck.map.background) + ", the system's parameters give " +
+      saved.voxel_size() != bg.voxel_size() || saved.truncation() != bg.truncation())
+    refuse("saved with a background of " + detail::checkpoint::grid_text(saved) + ", the system's parameters give " +
            detail::checkpoint::grid_text(bg));
   system.restore(std::move(ck.map));
 }

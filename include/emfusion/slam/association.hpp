@@ -2,14 +2,17 @@
 // likelihood of eq. 7): per pixel, the association likelihood of its point
 // to the background and to every live object at their current poses, in
 // frame.associations ([0] background, [k + 1] Map::objects[k]). The
-// likelihood is any VolumeLikelihood (PaperLikelihood by default); the
-// system runs this stage three times a frame (docs/system.md).
+// likelihood is any VolumeLikelihood (PaperLikelihood by default), read
+// over a sparse background through its with_volume (measurement_likelihood.hpp);
+// the system runs this stage three times a frame (docs/system.md).
 #pragma once
 
 #include <span>
+#include <type_traits>
 #include <utility>
 #include <vector>
 
+#include "emfusion/core/error.hpp"
 #include "emfusion/core/parallel.hpp"
 #include "emfusion/likelihood/e_step.hpp"
 #include "emfusion/likelihood/measurement_likelihood.hpp"
@@ -39,6 +42,16 @@ struct ForegroundWeight {
       out[i] = foreground.probability(x);
   }
 };
+
+/// `prototype`'s settings in a model of type M (the same model over another
+/// view, with_volume_t): its `params`, when it has them; the maps are bound
+/// after.
+template <class M, class Prototype>
+M rebound(const Prototype& prototype) {
+  M model{};
+  if constexpr (requires { model.params = prototype.params; }) model.params = prototype.params;
+  return model;
+}
 
 }  // namespace detail::association
 
@@ -72,14 +85,31 @@ void associate(const Map<S, B>& map, Frame<S, B>& frame, const Likelihood& likel
   if (!params.use_association) return foreground_weights(map, frame);
   std::vector<Likelihood> models;
   std::vector<SE3<S>> poses;
-  models.push_back(bind_volume<S>(likelihood, map.background.view()));
-  poses.push_back(map.background.pose().inverse() * map.T_world_camera);
   for (const auto& o : map.objects) {
     models.push_back(bind_volume<S>(likelihood, o->volume().view(), o->foreground().view()));
     poses.push_back(o->volume().pose().inverse() * map.T_world_camera);
   }
-  e_step(frame.points.backend(), frame.points, std::span<const Likelihood>(models), std::span<const SE3<S>>(poses),
-         frame.associations);
+  const SE3<S> T_background_camera = map.background.pose().inverse() * map.T_world_camera;
+  map.background.visit([&](const auto& background) {
+    using View = decltype(background.view());
+    if constexpr (std::is_same_v<View, TsdfView<S, const S>>) {
+      // A dense background: one model type for all, the background first.
+      models.insert(models.begin(), bind_volume<S>(likelihood, background.view()));
+      poses.insert(poses.begin(), T_background_camera);
+      e_step(frame.points.backend(), frame.points, std::span<const Likelihood>(models),
+             std::span<const SE3<S>>(poses), frame.associations);
+    } else if constexpr (requires { typename with_volume_t<Likelihood, View>; }) {
+      // A sparse background: the same model over its view (with_volume_t).
+      const auto model = bind_volume<S>(detail::association::rebound<with_volume_t<Likelihood, View>>(likelihood),
+                                        background.view());
+      e_step(frame.points.backend(), frame.points, model, T_background_camera, std::span<const Likelihood>(models),
+             std::span<const SE3<S>>(poses), frame.associations);
+    } else {
+      detail::require(false, "associate",
+                      "this likelihood reads dense volumes only (it has no with_volume): set sparse_background = "
+                      "false, or give it a with_volume member (likelihood/measurement_likelihood.hpp)");
+    }
+  });
 }
 
 /// Eq. 5 for a pixel that one model explains perfectly (its point on the

@@ -1,8 +1,9 @@
 // The state the EM-Fusion system estimates and carries from frame to frame:
-// the background TSDF, the live objects (ObjectModel: volume, foreground
-// counts, pose, existence), the lost ones kept for re-identification, the
-// camera pose, and the trajectories and records of everything so far. The
-// stages (slam/*.hpp) read and write a Map they are handed; System owns one.
+// the background TSDF (dense or sparse, background.hpp), the live objects
+// (ObjectModel: volume, foreground counts, pose, existence), the lost ones
+// kept for re-identification, the camera pose, and the trajectories and
+// records of everything so far. The stages (slam/*.hpp) read and write a Map
+// they are handed; System owns one.
 #pragma once
 
 #include <algorithm>
@@ -15,6 +16,7 @@
 #include "emfusion/core/backend.hpp"
 #include "emfusion/core/se3.hpp"
 #include "emfusion/core/timed_pose.hpp"
+#include "emfusion/slam/background.hpp"
 #include "emfusion/slam/frame_result.hpp"
 #include "emfusion/slam/object_model.hpp"
 #include "emfusion/slam/params.hpp"
@@ -41,27 +43,14 @@ struct LostObject {
   int lost_at = 0;  ///< the frame it was deleted as not visible
 };
 
-/// The background volume of `p`: background_voxels^3 voxels with the first
-/// camera at the centre of one face (DESIGN.md section 1). Validates `p`.
-template <class S>
-VolumeGeometry<S> background_geometry(const SystemParams<S>& p) {
-  p.validate();
-  VolumeGeometry<S> g;
-  g.dims = Vec3i{{p.background_voxels, p.background_voxels, p.background_voxels}};
-  g.voxel_size = p.background_voxel_size;
-  g.truncation = p.truncation_voxels * p.background_voxel_size;
-  g.T_world_volume = volume_pose_in_front_of(SE3<S>::identity(), S(p.background_voxels) * p.background_voxel_size);
-  return g;
-}
-
 template <class S, Backend B = Host>
 struct Map {
   using Object = ObjectModel<S, B>;
 
   /// An empty map: the background of `params`, no objects, the camera at the identity.
-  explicit Map(const SystemParams<S>& params, B backend = B{}) : background(background_geometry(params), backend) {}
+  explicit Map(const SystemParams<S>& params, B backend = B{}) : background(params, backend) {}
 
-  TsdfVolume<S, B> background;
+  BackgroundVolume<S, B> background;  ///< dense or sparse (SystemParams::sparse_background)
   /// Live objects, in creation order; association image and segmentation
   /// label k + 1 of a frame are objects[k].
   std::vector<std::unique_ptr<Object>> objects;

@@ -18,6 +18,7 @@
 #include "emfusion/slam/params.hpp"
 #include "emfusion/volume/foreground.hpp"
 #include "emfusion/volume/integrate.hpp"
+#include "emfusion/volume/sparse_tsdf_volume.hpp"
 
 namespace emfusion {
 
@@ -25,14 +26,23 @@ namespace emfusion {
 /// model k with weights frame.associations.image(k), the last fresh.size()
 /// objects (added by detection handling) with their first-view weights.
 /// `first`: the frame that starts the map, which has no association images;
-/// the background then takes every pixel with weight 1.
+/// the background then takes every pixel with weight 1. The workspaces
+/// (optional) keep the buffers of a dense and of a sparse background.
 template <class S, Backend B>
 void integrate_models(Map<S, B>& map, const Frame<S, B>& frame, const PinholeCamera<S>& camera,
                       const SystemParams<S>& params, const std::vector<NewObjectWeights<S, B>>& fresh, bool first,
-                      IntegrationWorkspace<S, B>* workspace = nullptr) {
+                      IntegrationWorkspace<S, B>* workspace = nullptr,
+                      SparseIntegrationWorkspace<S, B>* sparse_workspace = nullptr) {
   const std::size_t old_objects = map.objects.size() - fresh.size();
-  integrate(map.background, frame.depth, camera, map.T_world_camera, first ? nullptr : &frame.associations.image(0),
-            params.background_integration, workspace);
+  const Image<S, B>* background_weights = first ? nullptr : &frame.associations.image(0);
+  map.background.visit([&](auto& background) {
+    if constexpr (requires { background.allocated_blocks(); })
+      integrate(background, frame.depth, camera, map.T_world_camera, background_weights,
+                params.background_integration, sparse_workspace);
+    else
+      integrate(background, frame.depth, camera, map.T_world_camera, background_weights,
+                params.background_integration, workspace);
+  });
   for (std::size_t k = 0; k < map.objects.size(); ++k) {
     const Image<S, B>* weights =
         k < old_objects ? &frame.associations.image(int(k) + 1) : &fresh[k - old_objects].weights;

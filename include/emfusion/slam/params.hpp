@@ -43,8 +43,12 @@ struct SystemParams {
   /// limit. Structured-light sensors stop well before 10 m.
   S max_depth = S(10);
 
-  // Background volume: a cube of background_voxels^3, camera at the centre
-  // of one face in the first frame.
+  // Background volume (slam/background.hpp): the paper's cube of
+  // background_voxels^3 with the camera at the centre of one face in the
+  // first frame; with sparse_background, sparse voxel blocks instead,
+  // unbounded, at most background_blocks of them (the memory bound).
+  bool sparse_background = false;
+  int background_blocks = 1 << 18;  ///< 8^3-voxel blocks: 1 GiB of float voxels at most
   int background_voxels = 512;
   S background_voxel_size = S(0.01);
   S truncation_voxels = S(10);  ///< truncation of every volume, in its voxels
@@ -190,6 +194,8 @@ struct SystemParams {
     const char* w = "SystemParams";
     bilateral.validate("SystemParams.bilateral");
     detail::require(background_voxels >= 8 && background_voxels <= 2048, w, "background_voxels must be in 8..2048");
+    detail::require(background_blocks >= 1 && background_blocks <= (1 << 26), w,
+                    "background_blocks must be in 1..67108864");
     detail::require(background_voxel_size > S(0), w, "background_voxel_size must be positive");
     detail::require(truncation_voxels > S(1), w, "truncation_voxels must be greater than 1");
     detail::require(object_voxels >= 8 && object_voxels <= max_object_voxels, w,

@@ -113,8 +113,10 @@ void render_models(Map<S, B>& map, Frame<S, B>& frame, const PinholeCamera<S>& c
     for_each_index(backend, w * h,
                    detail::rendering::BackgroundRayEnd<S>{std::as_const(ws.object_depth).view(),
                                                           ws.background_ray_end.view(), params.occlusion_margin});
-    raycast(map.background, camera, map.T_world_camera, ws.background, rp,
-            static_cast<const ForegroundCounts<S, B>*>(nullptr), &std::as_const(ws.background_ray_end));
+    map.background.visit([&](const auto& background) {
+      raycast(background, camera, map.T_world_camera, ws.background, rp,
+              static_cast<const ForegroundCounts<S, B>*>(nullptr), &std::as_const(ws.background_ray_end));
+    });
   }
   const ImageView<const S> bg = map.objects.empty() ? ImageView<const S>{} : std::as_const(ws.background).depth.view();
   for_each_index(backend, w * h,

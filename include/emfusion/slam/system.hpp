@@ -145,7 +145,8 @@ class System {
                                  parts_.solver, result);
     result.times.detections = clock.lap();
 
-    integrate_models(map_, frame_, camera_, params_, update.fresh, starts_map, &integration_workspace_);
+    integrate_models(map_, frame_, camera_, params_, update.fresh, starts_map, &integration_workspace_,
+                     &sparse_workspace_);
     map_.started = true;
     result.times.integrate = clock.lap();
     if (det) update_foreground_counts(map_, frame_, *det, seg, update.object_of_detection, update.fresh, camera_);
@@ -172,11 +173,15 @@ class System {
   /// io/checkpoint.hpp): processing goes on from map.frames as if this
   /// system had built it. The map must have this system's background grid.
   void restore(Map<S, B>&& map) {
-    const VolumeGeometry<S> want = background_geometry(params_);
-    const Vec3i& d = map.background.dims();
-    detail::require(d[0] == want.dims[0] && d[1] == want.dims[1] && d[2] == want.dims[2] &&
-                        map.background.voxel_size() == want.voxel_size,
-                    "System::restore", "the map's background grid differs from the parameters' one");
+    detail::require(map.background.is_sparse() == params_.sparse_background &&
+                        map.background.voxel_size() == params_.background_voxel_size,
+                    "System::restore", "the map's background differs from the parameters' one (kind or voxel size)");
+    if (const auto* dense = map.background.dense()) {
+      const VolumeGeometry<S> want = background_geometry(params_);
+      const Vec3i& d = dense->dims();
+      detail::require(d[0] == want.dims[0] && d[1] == want.dims[1] && d[2] == want.dims[2], "System::restore",
+                      "the map's background grid differs from the parameters' one");
+    }
     map_ = std::move(map);
   }
 
@@ -194,7 +199,8 @@ class System {
   int frame_count() const { return map_.frames; }
   const SE3<S>& camera_pose() const { return map_.T_world_camera; }  ///< T_world_camera of the last frame
   const Trajectory& camera_trajectory() const { return map_.camera_trajectory; }
-  const TsdfVolume<S, B>& background() const { return map_.background; }
+  /// The background volume, dense or sparse (BackgroundVolume::dense(), sparse(), visit()).
+  const BackgroundVolume<S, B>& background() const { return map_.background; }
   /// Live objects; association image k + 1 and segmentation label k + 1 are objects()[k].
   const std::vector<std::unique_ptr<Object>>& objects() const { return map_.objects; }
   /// Every object ever created, in creation order.
@@ -267,6 +273,7 @@ class System {
   TrackingWorkspace<S, B> tracking_workspace_;
   RenderWorkspace<S, B> render_workspace_;
   IntegrationWorkspace<S, B> integration_workspace_;
+  SparseIntegrationWorkspace<S, B> sparse_workspace_;
 };
 
 }  // namespace emfusion

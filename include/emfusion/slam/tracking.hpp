@@ -188,12 +188,13 @@ PoseTrack track_camera(Map<S, B>& map, const Frame<S, B>& frame, const SystemPar
   };
   PoseTrack t;
   LinearizationCache<S, B> local;
-  const SE3<S> T_volume_camera =
-      track_in_volume(map.background, frame.points, &frame.associations.image(0), in_volume,
-                      scaled_norm(norm, map.background.voxel_size()),
-                      alignment_params(params, params.background_integration.max_weight), solver,
-                      params.retry_tracking, judge, t, workspace ? workspace->camera_cache : local,
-                      map.background.backend());
+  const SE3<S> T_volume_camera = map.background.visit([&](const auto& background) {
+    return track_in_volume(background, frame.points, &frame.associations.image(0), in_volume,
+                           scaled_norm(norm, background.voxel_size()),
+                           alignment_params(params, params.background_integration.max_weight), solver,
+                           params.retry_tracking, judge, t, workspace ? workspace->camera_cache : local,
+                           background.backend());
+  });
   map.T_world_camera = t.outcome == TrackingOutcome::tracked ? T_world_volume * T_volume_camera : from.previous;
   return t;
 }
