@@ -53,6 +53,28 @@ M rebound(const Prototype& prototype) {
   return model;
 }
 
+/// The E-step with a sparse background: the likelihood's own model over the
+/// sparse view (Likelihood::with_volume) for the background, then the objects.
+template <class S, Backend B, class Likelihood, class Sparse>
+  requires requires { typename Likelihood::template with_volume<typename Sparse::ConstView>; }
+void e_step_over_sparse(Frame<S, B>& frame, const Likelihood& likelihood, const Sparse& background,
+                        const SE3<S>& T_background_camera, const std::vector<Likelihood>& objects,
+                        const std::vector<SE3<S>>& poses) {
+  using Model = typename Likelihood::template with_volume<typename Sparse::ConstView>;
+  const Model model = bind_volume<S>(rebound<Model>(likelihood), background.view());
+  e_step(frame.points.backend(), frame.points, model, T_background_camera, std::span<const Likelihood>(objects),
+         std::span<const SE3<S>>(poses), frame.associations);
+}
+
+/// A likelihood without with_volume cannot read a sparse background.
+template <class S, Backend B, class Likelihood, class Sparse>
+void e_step_over_sparse(Frame<S, B>&, const Likelihood&, const Sparse&, const SE3<S>&, const std::vector<Likelihood>&,
+                        const std::vector<SE3<S>>&) {
+  detail::require(false, "associate",
+                  "this likelihood reads dense volumes only (it has no with_volume): set sparse_background = false, "
+                  "or give it a with_volume member (likelihood/measurement_likelihood.hpp)");
+}
+
 }  // namespace detail::association
 
 /// The ablation without association likelihoods (paper Table 3, Fig. 3):
@@ -98,16 +120,8 @@ void associate(const Map<S, B>& map, Frame<S, B>& frame, const Likelihood& likel
       poses.insert(poses.begin(), T_background_camera);
       e_step(frame.points.backend(), frame.points, std::span<const Likelihood>(models),
              std::span<const SE3<S>>(poses), frame.associations);
-    } else if constexpr (requires { typename with_volume_t<Likelihood, View>; }) {
-      // A sparse background: the same model over its view (with_volume_t).
-      const auto model = bind_volume<S>(detail::association::rebound<with_volume_t<Likelihood, View>>(likelihood),
-                                        background.view());
-      e_step(frame.points.backend(), frame.points, model, T_background_camera, std::span<const Likelihood>(models),
-             std::span<const SE3<S>>(poses), frame.associations);
     } else {
-      detail::require(false, "associate",
-                      "this likelihood reads dense volumes only (it has no with_volume): set sparse_background = "
-                      "false, or give it a with_volume member (likelihood/measurement_likelihood.hpp)");
+      detail::association::e_step_over_sparse(frame, likelihood, background, T_background_camera, models, poses);
     }
   });
 }
