@@ -115,11 +115,9 @@ void associate(const Map<S, B>& map, Frame<S, B>& frame, const Likelihood& likel
   map.background.visit([&](const auto& background) {
     using View = decltype(background.view());
     if constexpr (std::is_same_v<View, TsdfView<S, const S>>) {
-      // A dense background: one model type for all, the background first.
-      models.insert(models.begin(), bind_volume<S>(likelihood, background.view()));
-      poses.insert(poses.begin(), T_background_camera);
-      e_step(frame.points.backend(), frame.points, std::span<const Likelihood>(models),
-             std::span<const SE3<S>>(poses), frame.associations);
+      // A dense background: the same model type as the objects'.
+      e_step(frame.points.backend(), frame.points, bind_volume<S>(likelihood, background.view()), T_background_camera,
+             std::span<const Likelihood>(models), std::span<const SE3<S>>(poses), frame.associations);
     } else {
       detail::association::e_step_over_sparse(frame, likelihood, background, T_background_camera, models, poses);
     }

@@ -155,8 +155,9 @@ class System {
     // Objects deleted now were tracked in this frame: its pose is the last
     // of their trajectories.
     map_.record_poses(timestamp);
-    std::vector<int> ids_drawn;  // the objects the segmentation was rendered with
-    for (const auto& o : map_.objects) ids_drawn.push_back(o->id());
+    std::vector<int> ids_drawn;  // the objects the segmentation was rendered with (for merging)
+    if (det)
+      for (const auto& o : map_.objects) ids_drawn.push_back(o->id());
     delete_objects(map_, frame_, params_, result, det != nullptr, int(update.fresh.size()), !starts_map);
     // Two models of one object (merge_min_inliers; 0 turns it off).
     if (det)
