@@ -24,7 +24,7 @@
 #include "emfusion/io/run_outputs.hpp"
 #include "emfusion/sim/detector.hpp"
 #include "emfusion/sim/dynamic_scene.hpp"
-#include "emfusion/slam/system.hpp"
+#include "support/system_host.hpp"  // emfusion/slam/system.hpp, System<float, Host> compiled once
 #include "memory.hpp"
 #include "report.hpp"
 #include "support/workload.hpp"

@@ -30,7 +30,7 @@
 #include "emfusion/io/tum.hpp"
 #include "emfusion/sim/detector.hpp"
 #include "emfusion/sim/dynamic_scene.hpp"
-#include "emfusion/slam/system.hpp"
+#include "support/system_host.hpp"  // emfusion/slam/system.hpp, System<float, Host> compiled once
 #include "support/args.hpp"
 #include "memory.hpp"
 #include "report.hpp"

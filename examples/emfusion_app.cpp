@@ -74,7 +74,7 @@
 #include "emfusion/sim/detector.hpp"
 #include "emfusion/sim/dynamic_scene.hpp"
 #include "emfusion/slam/object_history.hpp"
-#include "emfusion/slam/system.hpp"
+#include "support/system_host.hpp"  // emfusion/slam/system.hpp, System<float, Host> compiled once
 #include "emfusion/volume/marching_cubes.hpp"
 #include "support/backend.hpp"
 #include "support/interrupt.hpp"

@@ -23,7 +23,7 @@
 #include "emfusion/eval/object_matching.hpp"
 #include "emfusion/sim/detector.hpp"
 #include "emfusion/sim/dynamic_scene.hpp"
-#include "emfusion/slam/system.hpp"
+#include "support/system_host.hpp"  // emfusion/slam/system.hpp, System<float, Host> compiled once
 #include "support/catch.hpp"
 
 using namespace emfusion;

@@ -92,7 +92,7 @@ double max_abs_diff(const Trajectory& a, const Trajectory& b) {
 }  // namespace
 
 TEMPLATE_LIST_TEST_CASE("Checkpoints: save, load, continue equals the uninterrupted run", "[io][checkpoint]",
-                        emfusion::test::AllConfigs) {
+                        emfusion::test::HeavyConfigs) {
   using S = typename TestType::Scalar;
   using B = typename TestType::Backend;
   const CheckpointScene<S> scene;
@@ -142,7 +142,7 @@ TEMPLATE_LIST_TEST_CASE("Checkpoints: save, load, continue equals the uninterrup
 }
 
 TEMPLATE_LIST_TEST_CASE("Checkpoints: a loaded map meshes without the sequence", "[io][checkpoint]",
-                        emfusion::test::AllConfigs) {
+                        emfusion::test::HeavyConfigs) {
   using S = typename TestType::Scalar;
   using B = typename TestType::Backend;
   const CheckpointScene<S> scene;

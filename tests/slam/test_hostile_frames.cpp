@@ -255,7 +255,7 @@ constexpr double recovered = 0.005;
 }  // namespace
 
 TEMPLATE_LIST_TEST_CASE("Hostile frames: a clean sequence is tracked and mapped on every frame", "[slam]",
-                        emfusion::test::AllConfigs) {
+                        emfusion::test::HeavyConfigs) {
   using S = typename TestType::Scalar;
   using B = typename TestType::Backend;
   Run<S, B> run;
@@ -279,7 +279,7 @@ TEMPLATE_LIST_TEST_CASE("Hostile frames: a clean sequence is tracked and mapped 
 }
 
 TEMPLATE_LIST_TEST_CASE("Hostile frames: all-zero depth keeps the poses, maps nothing and deletes nothing", "[slam]",
-                        emfusion::test::AllConfigs) {
+                        emfusion::test::HeavyConfigs) {
   using S = typename TestType::Scalar;
   using B = typename TestType::Backend;
   Run<S, B> run;
@@ -327,7 +327,7 @@ TEMPLATE_LIST_TEST_CASE("Hostile frames: all-zero depth keeps the poses, maps no
 }
 
 TEMPLATE_LIST_TEST_CASE("Hostile frames: an all-zero first frame does not start the map", "[slam]",
-                        emfusion::test::AllConfigs) {
+                        emfusion::test::HeavyConfigs) {
   using S = typename TestType::Scalar;
   using B = typename TestType::Backend;
   Run<S, B> run;
@@ -349,7 +349,7 @@ TEMPLATE_LIST_TEST_CASE("Hostile frames: an all-zero first frame does not start 
 }
 
 TEMPLATE_LIST_TEST_CASE("Hostile frames: NaN, infinite and negative depth never reach the map", "[slam]",
-                        emfusion::test::AllConfigs) {
+                        emfusion::test::HeavyConfigs) {
   using S = typename TestType::Scalar;
   using B = typename TestType::Backend;
   Run<S, B> run;
@@ -401,7 +401,7 @@ TEMPLATE_LIST_TEST_CASE("Hostile frames: NaN, infinite and negative depth never 
   CHECK(all_finite(background_values(run.system)));
 }
 
-TEMPLATE_LIST_TEST_CASE("Hostile frames: depth far beyond the volume", "[slam]", emfusion::test::AllConfigs) {
+TEMPLATE_LIST_TEST_CASE("Hostile frames: depth far beyond the volume", "[slam]", emfusion::test::HeavyConfigs) {
   using S = typename TestType::Scalar;
   using B = typename TestType::Backend;
   const auto far_frames = [](Run<S, B>& run, bool limited) {
@@ -447,7 +447,7 @@ TEMPLATE_LIST_TEST_CASE("Hostile frames: depth far beyond the volume", "[slam]",
 }
 
 TEMPLATE_LIST_TEST_CASE("Hostile frames: a camera that leaves the background volume and comes back", "[slam]",
-                        emfusion::test::AllConfigs) {
+                        emfusion::test::HeavyConfigs) {
   using S = typename TestType::Scalar;
   using B = typename TestType::Backend;
   Run<S, B> run;
@@ -493,7 +493,7 @@ TEMPLATE_LIST_TEST_CASE("Hostile frames: a camera that leaves the background vol
 }
 
 TEMPLATE_LIST_TEST_CASE("Hostile frames: 100 masks per frame stay within the object cap", "[slam]",
-                        emfusion::test::AllConfigs) {
+                        emfusion::test::HeavyConfigs) {
   using S = typename TestType::Scalar;
   using B = typename TestType::Backend;
   std::mt19937 rng(2024);
@@ -537,7 +537,7 @@ TEMPLATE_LIST_TEST_CASE("Hostile frames: 100 masks per frame stay within the obj
 }
 
 TEMPLATE_LIST_TEST_CASE("Hostile frames: instances with unusable labels or scores are ignored", "[slam]",
-                        emfusion::test::AllConfigs) {
+                        emfusion::test::HeavyConfigs) {
   using S = typename TestType::Scalar;
   using B = typename TestType::Backend;
   Run<S, B> run;
@@ -560,7 +560,7 @@ TEMPLATE_LIST_TEST_CASE("Hostile frames: instances with unusable labels or score
   CHECK(r2.matched == 1);
 }
 
-TEMPLATE_LIST_TEST_CASE("Hostile frames: masks covering the whole image", "[slam]", emfusion::test::AllConfigs) {
+TEMPLATE_LIST_TEST_CASE("Hostile frames: masks covering the whole image", "[slam]", emfusion::test::HeavyConfigs) {
   using S = typename TestType::Scalar;
   using B = typename TestType::Backend;
   Run<S, B> run;
@@ -588,7 +588,7 @@ TEMPLATE_LIST_TEST_CASE("Hostile frames: masks covering the whole image", "[slam
 }
 
 TEMPLATE_LIST_TEST_CASE("Hostile frames: a frame that pulls tracking away is refused", "[slam]",
-                        emfusion::test::AllConfigs) {
+                        emfusion::test::HeavyConfigs) {
   using S = typename TestType::Scalar;
   using B = typename TestType::Backend;
   // Frame 8 shows the room from 0.45 m further back: a solve from frame 7's

@@ -98,7 +98,7 @@ struct OneFrameMap {
 }  // namespace
 
 TEMPLATE_LIST_TEST_CASE("Stages alone: preprocessing, first mapping and object creation", "[slam]",
-                        emfusion::test::AllConfigs) {
+                        emfusion::test::HeavyConfigs) {
   using S = typename TestType::Scalar;
   using B = typename TestType::Backend;
   OneFrameMap<S, B> m;
@@ -128,7 +128,7 @@ TEMPLATE_LIST_TEST_CASE("Stages alone: preprocessing, first mapping and object c
 }
 
 TEMPLATE_LIST_TEST_CASE("Stages alone: the E-step at known poses, one tracking step, rendering", "[slam]",
-                        emfusion::test::AllConfigs) {
+                        emfusion::test::HeavyConfigs) {
   using S = typename TestType::Scalar;
   using B = typename TestType::Backend;
   OneFrameMap<S, B> m;
@@ -183,7 +183,7 @@ TEMPLATE_LIST_TEST_CASE("Stages alone: the E-step at known poses, one tracking s
 }
 
 TEMPLATE_LIST_TEST_CASE("Stages alone: resizing from a detection, deletion by the existence rule", "[slam]",
-                        emfusion::test::AllConfigs) {
+                        emfusion::test::HeavyConfigs) {
   using S = typename TestType::Scalar;
   using B = typename TestType::Backend;
   OneFrameMap<S, B> m, r;
@@ -231,7 +231,7 @@ TEMPLATE_LIST_TEST_CASE("Stages alone: resizing from a detection, deletion by th
 
 TEMPLATE_LIST_TEST_CASE("Stages alone: deletion rules count where the object is visible; unseen and weakly "
                         "associated objects are kept as lost",
-                        "[slam]", emfusion::test::AllConfigs) {
+                        "[slam]", emfusion::test::HeavyConfigs) {
   using S = typename TestType::Scalar;
   using B = typename TestType::Backend;
   PaperLikelihood<S> likelihood;
@@ -304,7 +304,7 @@ TEMPLATE_LIST_TEST_CASE("Stages alone: deletion rules count where the object is 
 }
 
 TEMPLATE_LIST_TEST_CASE("Stages alone: an object left behind by its tracking moves onto its detection",
-                        "[slam]", emfusion::test::AllConfigs) {
+                        "[slam]", emfusion::test::HeavyConfigs) {
   using S = typename TestType::Scalar;
   using B = typename TestType::Backend;
   OneFrameMap<S, B> m;
@@ -363,7 +363,7 @@ TEMPLATE_LIST_TEST_CASE("Stages alone: an object left behind by its tracking mov
 namespace {
 
 TEMPLATE_LIST_TEST_CASE("Stages alone: two models of one object merge into the older id", "[slam]",
-                        emfusion::test::AllConfigs) {
+                        emfusion::test::HeavyConfigs) {
   using S = typename TestType::Scalar;
   using B = typename TestType::Backend;
   OneFrameMap<S, B> m;
@@ -507,7 +507,7 @@ struct GaussianLikelihood {
 
 }  // namespace
 
-TEMPLATE_LIST_TEST_CASE("The system runs a user's likelihood, norm and solver", "[slam]", emfusion::test::AllConfigs) {
+TEMPLATE_LIST_TEST_CASE("The system runs a user's likelihood, norm and solver", "[slam]", emfusion::test::HeavyConfigs) {
   using S = typename TestType::Scalar;
   using B = typename TestType::Backend;
   static_assert(VolumeLikelihood<GaussianLikelihood<S>, S>);
@@ -543,7 +543,7 @@ TEMPLATE_LIST_TEST_CASE("The system runs a user's likelihood, norm and solver", 
 }
 
 TEMPLATE_LIST_TEST_CASE("The paper's parts given explicitly are the default system", "[slam]",
-                        emfusion::test::AllConfigs) {
+                        emfusion::test::HeavyConfigs) {
   using S = typename TestType::Scalar;
   using B = typename TestType::Backend;
   WallAndBox<S> s;
@@ -574,7 +574,7 @@ TEMPLATE_LIST_TEST_CASE("The paper's parts given explicitly are the default syst
 }
 
 TEMPLATE_LIST_TEST_CASE("Stages alone: tracking from a motion prediction, the retry, a refused solve", "[slam]",
-                        emfusion::test::AllConfigs) {
+                        emfusion::test::HeavyConfigs) {
   using S = typename TestType::Scalar;
   using B = typename TestType::Backend;
   OneFrameMap<S, B> m;

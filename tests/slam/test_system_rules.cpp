@@ -86,7 +86,7 @@ struct FirstFrame {
 
 }  // namespace
 
-TEMPLATE_LIST_TEST_CASE("Resizing an object keeps its fused surface in place", "[slam]", emfusion::test::AllConfigs) {
+TEMPLATE_LIST_TEST_CASE("Resizing an object keeps its fused surface in place", "[slam]", emfusion::test::HeavyConfigs) {
   using S = typename TestType::Scalar;
   using B = typename TestType::Backend;
   const PinholeCamera<S> camera = emfusion::test::small_camera<S>();
@@ -134,7 +134,7 @@ TEMPLATE_LIST_TEST_CASE("Resizing an object keeps its fused surface in place", "
 }
 
 TEMPLATE_LIST_TEST_CASE("A detection creates an object; a static class never does", "[slam]",
-                        emfusion::test::AllConfigs) {
+                        emfusion::test::HeavyConfigs) {
   using S = typename TestType::Scalar;
   using B = typename TestType::Backend;
   const FirstFrame<S, B> table("dining_table");
@@ -174,7 +174,7 @@ TEMPLATE_LIST_TEST_CASE("A detection creates an object; a static class never doe
 }
 
 TEMPLATE_LIST_TEST_CASE("A detection that spills onto the wall behind sizes the volume by the object", "[slam]",
-                        emfusion::test::AllConfigs) {
+                        emfusion::test::HeavyConfigs) {
   using S = typename TestType::Scalar;
   using B = typename TestType::Backend;
   // Detector masks are a few pixels too wide: grow the box's mask by 3 px,
@@ -268,7 +268,7 @@ TEMPLATE_LIST_TEST_CASE("A resting object settles and stays associated", "[slam]
 }
 
 TEMPLATE_LIST_TEST_CASE("Existence falls below 0.1 after repeated misses and the object is deleted", "[slam]",
-                        emfusion::test::AllConfigs) {
+                        emfusion::test::HeavyConfigs) {
   using S = typename TestType::Scalar;
   using B = typename TestType::Backend;
   FirstFrame<S, B> first("cup");
@@ -395,7 +395,7 @@ TEMPLATE_LIST_TEST_CASE("An object that left the view is re-identified when dete
 }
 
 TEMPLATE_LIST_TEST_CASE("With lost_object_frames = 0 an object that left the view is gone for good", "[slam]",
-                        emfusion::test::AllConfigs) {
+                        emfusion::test::HeavyConfigs) {
   using S = typename TestType::Scalar;
   using B = typename TestType::Backend;
   SystemParams<S> params = small_params<S>();
@@ -414,7 +414,7 @@ TEMPLATE_LIST_TEST_CASE("With lost_object_frames = 0 an object that left the vie
 }
 
 TEMPLATE_LIST_TEST_CASE("A new object at the image border survives until it is seen or the detector runs again",
-                        "[slam]", emfusion::test::AllConfigs) {
+                        "[slam]", emfusion::test::HeavyConfigs) {
   using S = typename TestType::Scalar;
   using B = typename TestType::Backend;
   // A box at the right edge whose detection is large enough to create an

@@ -31,12 +31,15 @@ using SystemRuleConfigs = std::tuple<Config<float, Host>, Config<float, Cuda>>;
 using SystemRuleConfigs = std::tuple<Config<float, Host>>;
 #endif
 
-/// The long sparse-volume tests (tests/volume/test_sparse_*.cpp,
-/// tests/solve/test_sparse_alignment.cpp): every config, but float only in
-/// the sanitizer build (EMFUSION_SANITIZER_BUILD). The double instantiation
-/// checks arithmetic, which the release build runs; memory and undefined
-/// behaviour show in the float instantiation of the same code, at half the
-/// sanitizer build's compile and run time.
+/// The long tests: the sparse volume (tests/volume/test_sparse_*.cpp,
+/// tests/solve/test_sparse_alignment.cpp) and the whole system (tests/slam,
+/// tests/io/test_checkpoint.cpp): every config, but float only in the
+/// sanitizer build (EMFUSION_SANITIZER_BUILD), which then compiles no
+/// System<double> (support/system_instances.cpp). Memory errors and
+/// undefined behaviour show in the float instantiation of the same code, at
+/// half the sanitizer build's compile and run time; the double one checks
+/// arithmetic, which every unit-test build without the sanitizers runs (the
+/// GPU machine's, `EMFUSION_SKIP_SANITIZERS=1 scripts/test.sh`).
 #if EMFUSION_SANITIZER_BUILD && !EMFUSION_HAS_CUDA
 using HeavyConfigs = std::tuple<Config<float, Host>>;
 #else

@@ -1,10 +1,15 @@
 // System<S, Host> for float and double, compiled once for the unit tests
-// (support/system_instances.cpp) instead of in every test file that runs the
-// system: include this instead of emfusion/slam/system.hpp. Under the
-// sanitizers each file's own instantiation took about half a minute.
+// instead of in every test file that runs the system: include this instead
+// of emfusion/slam/system.hpp. float is the instantiation every program of
+// the repository shares (examples/support/system_host.hpp), double the
+// tests' own (support/system_instances.cpp; not in the sanitizer build,
+// whose system tests run float only: support/configs.hpp, HeavyConfigs).
+// Under the sanitizers each file's own instantiation took about half a
+// minute.
 #pragma once
 
-#include "emfusion/slam/system.hpp"
+#include "support/system_host.hpp"
 
-extern template class emfusion::System<float, emfusion::Host>;
+#if !EMFUSION_SANITIZER_BUILD
 extern template class emfusion::System<double, emfusion::Host>;
+#endif

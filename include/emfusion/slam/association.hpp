@@ -66,13 +66,23 @@ void e_step_over_sparse(Frame<S, B>& frame, const Likelihood& likelihood, const 
          std::span<const SE3<S>>(poses), frame.associations);
 }
 
+/// Refuses, naming `where`, a sparse background for a likelihood that has no
+/// with_volume (it reads dense volumes only).
+template <class S, class Likelihood>
+void require_sparse_capable(bool sparse_background, const char* where) {
+  constexpr bool capable = requires {
+    typename Likelihood::template with_volume<SparseTsdfView<S, const S>>;
+  };
+  detail::require(capable || !sparse_background, where,
+                  "this likelihood reads dense volumes only (it has no with_volume): set sparse_background = false, "
+                  "or give it a with_volume member (likelihood/measurement_likelihood.hpp)");
+}
+
 /// A likelihood without with_volume cannot read a sparse background.
 template <class S, Backend B, class Likelihood, class Sparse>
 void e_step_over_sparse(Frame<S, B>&, const Likelihood&, const Sparse&, const SE3<S>&, const std::vector<Likelihood>&,
                         const std::vector<SE3<S>>&) {
-  detail::require(false, "associate",
-                  "this likelihood reads dense volumes only (it has no with_volume): set sparse_background = false, "
-                  "or give it a with_volume member (likelihood/measurement_likelihood.hpp)");
+  require_sparse_capable<S, Likelihood>(true, "associate");
 }
 
 }  // namespace detail::association

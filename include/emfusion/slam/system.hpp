@@ -87,6 +87,7 @@ class System {
   System(const PinholeCamera<S>& camera, const SystemParams<S>& params, B backend, const Parts& parts)
       : camera_(camera), params_(params), parts_(parts), backend_(backend), map_(params, backend) {
     camera_.validate("System");  // the parameters were validated by the map's background
+    detail::association::require_sparse_capable<S, Likelihood>(params.sparse_background, "System");
   }
 
   /// Processes one depth frame (metres, camera size) with the detector's

@@ -1,0 +1,4 @@
+// The one instantiation of System<float, Host> (support/system_host.hpp).
+#include "support/system_host.hpp"
+
+template class emfusion::System<float, emfusion::Host>;
