@@ -8,6 +8,10 @@
 //
 //   bench_system [--backend cpu|cuda] [--frames N] [--objects K] [--width W]
 //                [--voxels N] [--voxel-size M] [--sequence DIR] [--json FILE]
+//                [--set key=value ...]
+//
+// --set overrides a system parameter by its name in the app's configuration
+// (docs/parameters.md; io/config.hpp), after --voxels and --voxel-size.
 //
 // The first frame (allocation, no tracking) is left out of the statistics.
 // The detector's own time is not part of the system's (it is precomputed,
@@ -25,6 +29,7 @@
 #include <fmt/core.h>
 
 #include "emfusion/eval/ate.hpp"
+#include "emfusion/io/config.hpp"
 #include "emfusion/io/masks.hpp"
 #include "emfusion/io/run_outputs.hpp"
 #include "emfusion/io/tum.hpp"
@@ -46,6 +51,7 @@ struct Options {
   std::string backend = "cpu", sequence, json;
   int frames = 300, objects = 3, width = 640, voxels = 512;
   double voxel_size = 0.01;
+  std::vector<std::string> overrides;  // --set key=value
 };
 
 struct Stats {
@@ -64,6 +70,7 @@ void run(const Options& o) {
   SystemParams<S> params;
   params.background_voxels = o.voxels;
   params.background_voxel_size = S(o.voxel_size);
+  for (const std::string& assignment : o.overrides) apply_override(params, assignment);
   const B backend{};
   const double device_before = bench::device_used_mib<B>();
   double device_peak = device_before;
@@ -87,8 +94,12 @@ void run(const Options& o) {
   json["background_voxels"] = o.voxels;
   json["background_voxel_size_m"] = o.voxel_size;
   json["max_live_objects"] = max_objects;
-  fmt::print("{}, {} frames of {}x{}, background {}^3 x {:.3g} m, up to {} live objects\n", B::name, w.depth.size(),
-             w.camera.width, w.camera.height, o.voxels, o.voxel_size, max_objects);
+  const std::string background = system.background().describe();
+  json["background"] = background;
+  json["background_mib"] = double(system.background().memory_bytes()) / (1 << 20);
+  fmt::print("{}, {} frames of {}x{}, background {} of {:.3g} m ({:.1f} MiB), up to {} live objects\n", B::name,
+             w.depth.size(), w.camera.width, w.camera.height, background, o.voxel_size,
+             double(system.background().memory_bytes()) / (1 << 20), max_objects);
   fmt::print("{:<18} {:>10} {:>10}\n", "stage (ms)", "median", "p90");
   Json& timings = json["timings_ms"] = Json::object();
   const std::pair<const char*, double StageTimes::*> stages[] = {
@@ -133,6 +144,7 @@ int main(int argc, char** argv) {
       else if (a == "--voxel-size") o.voxel_size = examples::parse_positive_double(a, v);
       else if (a == "--sequence") o.sequence = v;
       else if (a == "--json") o.json = v;
+      else if (a == "--set") o.overrides.push_back(v);
       else throw std::invalid_argument("unknown option '" + a + "'");
     });
     examples::with_backend(o.backend, [&](auto backend) { run<decltype(backend)>(o); });

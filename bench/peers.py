@@ -26,7 +26,9 @@ absent they are skipped with a message. --quick runs
 the first 60 frames of redkitchen_300 and synthetic-long.
 
 Methods. track_camera runs once per --tc NAME=ARGS (default: one configuration, 'track_camera',
-with --tc-args, default none; its own defaults: 1 cm voxels, 512^3): `track_camera SEQ TRAJ ARGS`.
+with --tc-args, default none; its own defaults: a sparse volume of 1 cm voxels, three pyramid levels,
+every 2nd pixel of a 640x480 frame; --tc paper="--volume dense --pyramid 1 --stride 1 --reference-solver"
+is the paper's tracker): `track_camera SEQ TRAJ ARGS`.
 Its time per frame is the process's wall time over the frames (reading PNGs included, as for Open3D),
 and its CPU time (user + system, all threads; from getrusage of the child), which a machine shared
 with other work inflates less than the wall time.

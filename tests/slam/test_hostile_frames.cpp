@@ -712,4 +712,15 @@ TEST_CASE("Hostile frames: the guards' parameters are validated", "[slam]") {
   CHECK(named([](SystemParams<float>& p) { p.keep_visible_fraction = 0; }, "keep_visible_fraction"));
   CHECK(named([](SystemParams<float>& p) { p.keep_visible_fraction = 2; }, "keep_visible_fraction"));
   CHECK(named([](SystemParams<float>& p) { p.keep_visible_fraction = NAN; }, "keep_visible_fraction"));
+  // The solver's settings.
+  CHECK(error([](SystemParams<float>& p) { p.lm = LevenbergMarquardtParams{}; }).empty());  // the reference
+  CHECK(error([](SystemParams<float>& p) { p.lm.converged_step = 0; }).empty());
+  CHECK(named([](SystemParams<float>& p) { p.lm.tau = 0; }, "tau"));
+  CHECK(named([](SystemParams<float>& p) { p.lm.tau = NAN; }, "tau"));
+  CHECK(named([](SystemParams<float>& p) { p.lm.nu = 1; }, "nu"));
+  CHECK(named([](SystemParams<float>& p) { p.lm.max_iterations = -1; }, "max_iterations"));
+  CHECK(named([](SystemParams<float>& p) { p.lm.eps2 = -1e-6; }, "eps2"));
+  CHECK(named([](SystemParams<float>& p) { p.lm.converged_step = -1; }, "converged_step"));
+  CHECK(named([](SystemParams<float>& p) { p.lm.converged_step = NAN; }, "converged_step"));
+  CHECK(named([](SystemParams<float>& p) { p.lm.refine_tau = -1; }, "refine_tau"));
 }

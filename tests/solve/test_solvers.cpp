@@ -121,3 +121,46 @@ TEMPLATE_LIST_TEST_CASE("Solvers report why they could not solve", "[solve]", em
   CHECK(report.converged());
   CHECK(double(norm(damped * vec3(S(0.5), S(0.5), S(2)) - vec3(S(0.6), S(0.5), S(2)))) < 1e-3);
 }
+
+TEMPLATE_LIST_TEST_CASE("LM's converged_step and refined(): fewer iterations, the same pose", "[solve]",
+                        emfusion::test::AllConfigs) {
+  using S = typename TestType::Scalar;
+  using B = typename TestType::Backend;
+  const Fixture<S, B> f(200, 3);
+  const auto problem = f.problem();
+  const B backend{};
+  const auto lin = [&](const SE3<S>& T, const SE3<S>* ref) { return linearize(backend, problem, L2Norm<S>{}, T, ref); };
+  const double tol = sizeof(S) <= 4 ? 2e-5 : 1e-8;
+
+  // The reference runs until its damped steps fall below eps2.
+  SolveReport reference_report;
+  const SE3<S> reference = levenberg_marquardt(lin, SE3<S>::identity(), {}, &reference_report);
+  REQUIRE(pose_error(reference, f.truth) < tol);
+
+  // Stopping once the undamped step is below 1e-4 lands within about that
+  // of the solution, and sooner.
+  LevenbergMarquardtParams quick;
+  quick.converged_step = 1e-4;
+  SolveReport quick_report;
+  const SE3<S> stopped = levenberg_marquardt(lin, SE3<S>::identity(), quick, &quick_report);
+  INFO("reference " << reference_report.iterations << " iterations, converged_step " << quick_report.iterations);
+  CHECK(quick_report.reason == StopReason::step_small);
+  CHECK(quick_report.iterations < reference_report.iterations);
+  CHECK(pose_error(stopped, f.truth) < 1e-4);
+
+  // From a start near the solution, refined() (refine_tau 1e-6 against the
+  // reference's tau 1e3) needs fewer iterations for the same pose; a solver
+  // without refine_tau, or without refined() at all, is itself.
+  LevenbergMarquardt solver;
+  solver.params.refine_tau = 1e-6;
+  const SE3<S> near = SE3<S>::exp(Vec6<S>{{S(0.002), S(0), S(-0.001), S(0.001), S(0), S(0)}}) * f.truth;
+  SolveReport coarse_report, refined_report;
+  const SE3<S> from_solver = solver.solve(lin, near, &coarse_report);
+  const SE3<S> from_refined = refined(solver).solve(lin, near, &refined_report);
+  CHECK(refined(solver).params.tau == 1e-6);
+  CHECK(refined(LevenbergMarquardt{}).params.tau == LevenbergMarquardtParams{}.tau);
+  CHECK(refined(GaussNewton{}).params.max_iterations == GaussNewtonParams{}.max_iterations);
+  CHECK(refined_report.iterations < coarse_report.iterations);
+  CHECK(pose_error(from_solver, f.truth) < tol);
+  CHECK(pose_error(from_refined, f.truth) < tol);
+}

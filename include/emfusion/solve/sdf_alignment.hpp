@@ -252,7 +252,8 @@ SE3<S> coarse_to_fine(int levels, const SE3<S>& start, SolveReport* report, Solv
 }
 
 /// Minimises the robust cost of `terms` with `solver` from `start`, coarse to
-/// fine over params.pyramid_levels levels (coarse_to_fine). `values` is
+/// fine over params.pyramid_levels levels (coarse_to_fine); the levels below
+/// the coarsest start where it stopped, with refined(solver). `values` is
 /// reset for every level (the terms change with it).
 template <class S, Backend B, class Volume, class Norm, class Solver>
   requires RobustNorm<Norm, S> && PoseSolver<Solver, S>
@@ -265,7 +266,7 @@ SE3<S> solve_coarse_to_fine(const B& backend, const SdfAlignmentTerms<S, Volume>
     const auto lin = [&](const SE3<S>& pose, const SE3<S>* reference) {
       return linearize(backend, level_terms, norm, pose, reference, values);
     };
-    return solver.solve(lin, from, &r);
+    return level < params.pyramid_levels - 1 ? refined(solver).solve(lin, from, &r) : solver.solve(lin, from, &r);
   });
 }
 

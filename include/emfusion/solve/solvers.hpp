@@ -15,7 +15,10 @@
 // damping tau * max(diag H), gain ratio test, damping scaled by
 // max(1/3, 1 - (2 rho - 1)^3) after a success and by nu (doubling) after a
 // failure; it stops when |g|_inf <= eps1, when the step is below
-// eps2 (|xi(T)| + eps2), or after max_iterations linearisations.
+// eps2 (|xi(T)| + eps2), when the undamped step is below converged_step
+// (off in the reference), or after max_iterations linearisations. A solve
+// that starts near its solution (the finer levels of a coarse-to-fine solve)
+// may start less damped: refined(solver).
 #pragma once
 
 #include <algorithm>
@@ -25,6 +28,7 @@
 #include <string>
 #include <utility>
 
+#include "emfusion/core/error.hpp"
 #include "emfusion/core/se3.hpp"
 #include "emfusion/solve/normal_equations.hpp"
 
@@ -77,6 +81,31 @@ struct LevenbergMarquardtParams {
   /// Floor of the damping, relative to the largest diagonal entry of H: keeps
   /// steps bounded along directions the data cannot observe (a single plane).
   double min_damping = 1e-6;
+  /// Converged when the undamped (Gauss-Newton) step of the current
+  /// linearisation is shorter than this (the norm of the se(3) increment,
+  /// radians and metres, as eps2's): the pose is that close to the minimum
+  /// of the local model. Unlike eps2 it does not wait for the damping to
+  /// shrink the step, nor scale with the pose's distance from its frame's
+  /// origin. 0 = off (the reference, which runs to eps2 or to the
+  /// scalar's resolution).
+  double converged_step = 0;
+  /// tau for a start already near the solution: refined(LevenbergMarquardt)
+  /// solves with it (coarse-to-fine's finer levels). 0 = tau.
+  double refine_tau = 0;
+
+  /// Throws std::invalid_argument (prefixed with `where`) unless every value
+  /// is in its range: max_iterations >= 0, tau > 0, nu > 1, the tolerances,
+  /// min_terms, min_damping, converged_step and refine_tau >= 0 (NaN fails).
+  void validate(const char* where = "LevenbergMarquardtParams") const {
+    detail::require(max_iterations >= 0, where, "lm max_iterations must not be negative");
+    detail::require(tau > 0 && std::isfinite(tau), where, "lm tau must be positive and finite");
+    detail::require(nu > 1 && std::isfinite(nu), where, "lm nu must be greater than 1");
+    detail::require(eps1 >= 0 && eps2 >= 0 && min_terms >= 0 && min_damping >= 0, where,
+                    "lm eps1, eps2, min_terms and min_damping must not be negative");
+    detail::require(converged_step >= 0 && std::isfinite(converged_step), where,
+                    "lm converged_step must not be negative (0: off)");
+    detail::require(refine_tau >= 0 && std::isfinite(refine_tau), where, "lm refine_tau must not be negative (0: tau)");
+  }
 };
 
 struct GaussNewtonParams {
@@ -178,6 +207,11 @@ SE3<S> levenberg_marquardt(F&& linearize, const SE3<S>& start, const LevenbergMa
         break;
       }
       Vec6<double> xi;
+      if (p.converged_step > 0 && solve_damped(n, p.min_damping * detail::max_diagonal(n), xi) &&
+          norm(xi) <= p.converged_step) {
+        report.reason = StopReason::step_small;
+        break;
+      }
       if (!solve_damped(n, mu, xi)) {
         report.reason = StopReason::singular;
         break;
@@ -290,6 +324,13 @@ struct LevenbergMarquardt {
   SE3<S> solve(F&& linearize, const SE3<S>& start, SolveReport* report = nullptr) const {
     return levenberg_marquardt(std::forward<F>(linearize), start, params, report);
   }
+  /// This solver for a start already near the solution: tau = refine_tau
+  /// (when set).
+  LevenbergMarquardt refined() const {
+    LevenbergMarquardt r = *this;
+    if (params.refine_tau > 0) r.params.tau = params.refine_tau;
+    return r;
+  }
 };
 
 /// gauss_newton as a PoseSolver.
@@ -303,5 +344,19 @@ struct GaussNewton {
 };
 
 static_assert(PoseSolver<LevenbergMarquardt, float> && PoseSolver<GaussNewton, double>);
+
+/// The solver for a start already near the solution (the finer levels of a
+/// coarse-to-fine solve): solver.refined() where the solver has it
+/// (LevenbergMarquardt: refine_tau), the solver itself otherwise (a user's
+/// solver needs nothing more).
+template <class Solver>
+Solver refined(const Solver& solver) {
+  if constexpr (requires {
+                  { solver.refined() } -> std::convertible_to<Solver>;
+                })
+    return solver.refined();
+  else
+    return solver;
+}
 
 }  // namespace emfusion
