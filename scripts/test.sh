@@ -5,11 +5,10 @@
 #      release) without the Catch2 unit tests (EMFUSION_BUILD_UNIT_TESTS=OFF:
 #      they run once, in step 3; with EMFUSION_SKIP_SANITIZERS=1 here): the
 #      examples and their runs, the benchmarks' runs, the consumer,
-#   3. builds everything but the benchmarks under AddressSanitizer + UBSan in
-#      build-asan/ (preset asan-ubsan) and runs the ctest suite there, two at
-#      a time: the unit tests and the app's runs; not what only the release
-#      build runs (label release_only: the long simulated runs, the tools
-#      beside the app, the consumer),
+#   3. builds the unit tests under AddressSanitizer + UBSan in build-asan/
+#      (preset asan-ubsan) and runs the ctest suite there, two at a time;
+#      not what only the release build runs (label release_only: the long
+#      simulated runs, the app and the tools beside it, the consumer),
 #   4. fuzzes every parser for EMFUSION_FUZZ_SECONDS each (scripts/fuzz.sh,
 #      clang + libFuzzer, build-fuzz/),
 #   5. when nvcc is present, configures build-cuda/ and compiles the targets
