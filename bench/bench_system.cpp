@@ -95,11 +95,11 @@ void run(const Options& o) {
   json["background_voxel_size_m"] = o.voxel_size;
   json["max_live_objects"] = max_objects;
   const std::string background = system.background().describe();
+  const double background_mib = double(system.background().memory_bytes()) / (1 << 20);
   json["background"] = background;
-  json["background_mib"] = double(system.background().memory_bytes()) / (1 << 20);
+  json["background_mib"] = background_mib;
   fmt::print("{}, {} frames of {}x{}, background {} of {:.3g} m ({:.1f} MiB), up to {} live objects\n", B::name,
-             w.depth.size(), w.camera.width, w.camera.height, background, o.voxel_size,
-             double(system.background().memory_bytes()) / (1 << 20), max_objects);
+             w.depth.size(), w.camera.width, w.camera.height, background, o.voxel_size, background_mib, max_objects);
   fmt::print("{:<18} {:>10} {:>10}\n", "stage (ms)", "median", "p90");
   Json& timings = json["timings_ms"] = Json::object();
   const std::pair<const char*, double StageTimes::*> stages[] = {

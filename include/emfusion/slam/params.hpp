@@ -69,7 +69,7 @@ struct SystemParams {
   /// the iterations (docs/decisions.md). LevenbergMarquardtParams{} is the
   /// reference. lm.converged_step stays off here: on the generalisation
   /// benchmark it moved objects both ways (docs/decisions.md, "Solver
-  /// stops and pixel stride for track_camera").
+  /// stops, pyramid and pixel stride").
   LevenbergMarquardtParams lm = fast_lm();
   int pixel_stride = 1;          ///< use every n-th pixel in x and y when tracking
   /// Coarse-to-fine levels of every pose solve (SdfAlignmentParams::

@@ -182,8 +182,7 @@ SE3<S> align_to_volume_and_intensity(const Volume& volume, const Image<Vec3<S>, 
           if (weight > S(0)) n += scaled(linearize(backend, photometric, photometric_norm, pose, reference), weight);
           return n;
         };
-        return level < params.pyramid_levels - 1 ? refined(solver).solve(lin, from, &r)
-                                                 : solver.solve(lin, from, &r);
+        return solver_at_level(solver, level, params.pyramid_levels).solve(lin, from, &r);
       });
   return volume.pose() * T;
 }

@@ -251,6 +251,14 @@ SE3<S> coarse_to_fine(int levels, const SE3<S>& start, SolveReport* report, Solv
   return T;
 }
 
+/// The solver for level `level` of a `levels`-level coarse_to_fine solve:
+/// `solver` on the coarsest, refined(solver) on the finer ones, which start
+/// where the coarser one stopped.
+template <class Solver>
+Solver solver_at_level(const Solver& solver, int level, int levels) {
+  return level < levels - 1 ? refined(solver) : solver;
+}
+
 /// Minimises the robust cost of `terms` with `solver` from `start`, coarse to
 /// fine over params.pyramid_levels levels (coarse_to_fine); the levels below
 /// the coarsest start where it stopped, with refined(solver). `values` is
@@ -266,7 +274,7 @@ SE3<S> solve_coarse_to_fine(const B& backend, const SdfAlignmentTerms<S, Volume>
     const auto lin = [&](const SE3<S>& pose, const SE3<S>* reference) {
       return linearize(backend, level_terms, norm, pose, reference, values);
     };
-    return level < params.pyramid_levels - 1 ? refined(solver).solve(lin, from, &r) : solver.solve(lin, from, &r);
+    return solver_at_level(solver, level, params.pyramid_levels).solve(lin, from, &r);
   });
 }
 
