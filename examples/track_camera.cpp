@@ -71,7 +71,7 @@ struct Options {
   std::string sequence, output, backend = "cpu";
   std::string ground_truth;  // --ground-truth: where to write the input's reference trajectory
   int max_frames = 0, voxels = 512;
-  int stride = 0;  // --stride; 0 = auto_stride
+  int stride = 0;  // --stride; 0 = auto_pixel_stride
   bool verbose = false, central_gradient = false, predict = false, retry = false;
   int pyramid = 3;
   bool reference_solver = false;  // --reference-solver: LevenbergMarquardtParams{}, the paper's
@@ -89,14 +89,6 @@ struct Options {
   double huber_voxels = 2, truncation_voxels = 10;
   double photometric = 0, photometric_huber = 0.05;  // --photometric: weight of the colour term; 0 = off
 };
-
-/// The default pixel stride: every 2nd pixel while that leaves at least
-/// 50000 pixels (a 640x480 frame keeps 76800 for the six unknowns), else
-/// every pixel (a 320x240 frame, or a tiny test image, where every term
-/// counts).
-int auto_stride(const PinholeCamera<S>& camera) {
-  return (camera.width / 2) * (camera.height / 2) >= 50000 ? 2 : 1;
-}
 
 /// The default solver: the system's (tau 1e-3, eps2 1e-6), converged once
 /// the undamped step is below 1e-5 (10 um, 0.0006 degrees), which eps2
@@ -116,7 +108,7 @@ void track_with(const Options& o, const examples::CameraInput& seq, Volume& volu
   const int frames = o.max_frames > 0 && o.max_frames < int(seq.size()) ? o.max_frames : int(seq.size());
   const HuberNorm<S> huber{S(o.huber_voxels) * volume.voxel_size()};
   SdfAlignmentParams<S> align;
-  align.pixel_stride = o.stride > 0 ? o.stride : auto_stride(camera);
+  align.pixel_stride = o.stride > 0 ? o.stride : auto_pixel_stride(camera.width, camera.height);
   align.central_gradient = o.central_gradient;
   align.depth_noise_reference = S(o.depth_weight);
   align.pyramid_levels = o.pyramid;

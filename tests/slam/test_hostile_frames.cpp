@@ -683,6 +683,19 @@ TEST_CASE("Hostile frames: the guards' parameters are validated", "[slam]") {
         std::string::npos);
   CHECK(error([](SystemParams<float>& p) { p.max_camera_motion.translation = NAN; }).find("motion bounds") !=
         std::string::npos);
+  // The camera's own solve settings.
+  CHECK(error([](SystemParams<float>& p) { p.camera_pixel_stride = 3; }).empty());
+  CHECK(error([](SystemParams<float>& p) { p.camera_converged_step = 0; }).empty());  // off
+  CHECK(error([](SystemParams<float>& p) { p.camera_pixel_stride = -1; }).find("camera_pixel_stride") !=
+        std::string::npos);
+  CHECK(error([](SystemParams<float>& p) { p.camera_pyramid_levels = 0; }).find("camera_pyramid_levels") !=
+        std::string::npos);
+  CHECK(error([](SystemParams<float>& p) { p.camera_pyramid_levels = 7; }).find("camera_pyramid_levels") !=
+        std::string::npos);
+  CHECK(error([](SystemParams<float>& p) { p.camera_converged_step = -1e-5; }).find("camera_converged_step") !=
+        std::string::npos);
+  CHECK(error([](SystemParams<float>& p) { p.camera_converged_step = NAN; }).find("camera_converged_step") !=
+        std::string::npos);
   // Lost objects.
   CHECK(error([](SystemParams<float>& p) { p.lost_object_frames = 0; }).empty());  // the paper's rule
   CHECK(error([](SystemParams<float>& p) { p.lost_object_frames = -1; }).find("lost_object_frames") !=
@@ -723,4 +736,29 @@ TEST_CASE("Hostile frames: the guards' parameters are validated", "[slam]") {
   CHECK(named([](SystemParams<float>& p) { p.lm.converged_step = -1; }, "converged_step"));
   CHECK(named([](SystemParams<float>& p) { p.lm.converged_step = NAN; }, "converged_step"));
   CHECK(named([](SystemParams<float>& p) { p.lm.refine_tau = -1; }, "refine_tau"));
+}
+
+TEST_CASE("The camera's solve takes its own stride, pyramid and stop; objects keep theirs", "[slam]") {
+  SystemParams<float> p;
+  // Every 2nd pixel where that leaves 50 000 (640x480), every pixel below.
+  CHECK(camera_alignment_params(p, 640, 480).pixel_stride == 2);
+  CHECK(camera_alignment_params(p, 320, 240).pixel_stride == 1);
+  CHECK(camera_alignment_params(p, 640, 480).pyramid_levels == 3);
+  CHECK(alignment_params(p, p.object_integration.max_weight).pixel_stride == 1);
+  CHECK(alignment_params(p, p.object_integration.max_weight).pyramid_levels == 1);
+  p.camera_pixel_stride = 3;
+  p.camera_pyramid_levels = 2;
+  CHECK(camera_alignment_params(p, 640, 480).pixel_stride == 3);
+  CHECK(camera_alignment_params(p, 640, 480).pyramid_levels == 2);
+  CHECK(camera_alignment_params(p, 640, 480).confidence_normalizer == p.background_integration.max_weight);
+  // The stop reaches a solver that has it; others are left as they are.
+  LevenbergMarquardt lm{p.lm};
+  REQUIRE(lm.params.converged_step == 0);
+  CHECK(camera_solver(lm, p).params.converged_step == 1e-5);
+  CHECK(camera_solver(lm, p).params.tau == lm.params.tau);
+  p.camera_converged_step = 0;
+  CHECK(camera_solver(lm, p).params.converged_step == 0);
+  GaussNewton gn;
+  gn.params.max_iterations = 7;
+  CHECK(camera_solver(gn, p).params.max_iterations == 7);
 }

@@ -2,7 +2,9 @@
 // the camera against the background, then every object against the frame,
 // each a direct SDF alignment weighted by its association image, the map's
 // confidence and a robust norm, minimised by a PoseSolver, coarse to fine
-// over SystemParams::pyramid_levels. A solve starts at the last pose or at
+// over SystemParams::pyramid_levels (the camera over camera_pyramid_levels,
+// with its own stride and stop: camera_alignment_params, camera_solver). A
+// solve starts at the last pose or at
 // its motion prediction (predict_camera, predict_objects), whichever the
 // frame agrees with better. A solved pose is taken only if the solve
 // converged with enough terms and moved less than the per-frame bound
@@ -82,6 +84,24 @@ SdfAlignmentParams<S> alignment_params(const SystemParams<S>& params, S max_weig
   a.pyramid_levels = params.pyramid_levels;
   a.depth_noise_reference = params.depth_noise_reference;
   return a;
+}
+
+/// The alignment of the camera's solve: alignment_params with the
+/// background's W_max and the camera's own stride (camera_pixel_stride; 0:
+/// auto_pixel_stride of the frame's size) and camera_pyramid_levels.
+template <class S>
+SdfAlignmentParams<S> camera_alignment_params(const SystemParams<S>& params, int width, int height) {
+  SdfAlignmentParams<S> a = alignment_params(params, params.background_integration.max_weight);
+  a.pixel_stride = params.camera_pixel_stride > 0 ? params.camera_pixel_stride : auto_pixel_stride(width, height);
+  a.pyramid_levels = params.camera_pyramid_levels;
+  return a;
+}
+
+/// The solver of the camera's solve: `solver` with camera_converged_step
+/// (with_converged_step: only a solver that has that stop changes).
+template <class S, class Solver>
+Solver camera_solver(const Solver& solver, const SystemParams<S>& params) {
+  return with_converged_step(solver, params.camera_converged_step);
 }
 
 /// Where a pose's solve may start: the pose of the last frame and, with
@@ -168,9 +188,11 @@ std::vector<PoseStarts<S>> predict_objects(Map<S, B>& map, double timestamp, con
 
 /// Tracks the camera against the background with frame.points weighted by
 /// frame.associations.image(0), from `starts` (predict_camera; without
-/// them, from map.T_world_camera); sets map.T_world_camera to the solved
-/// pose when the outcome is `tracked`, else to the previous pose. `norm` is
-/// in voxels of the background (scaled_norm).
+/// them, from map.T_world_camera), with the camera's own alignment and
+/// solver settings (camera_alignment_params, camera_solver); sets
+/// map.T_world_camera to the solved pose when the outcome is `tracked`,
+/// else to the previous pose. `norm` is in voxels of the background
+/// (scaled_norm).
 template <class S, Backend B, class Norm, class Solver>
   requires RobustNorm<Norm, S> && PoseSolver<Solver, S>
 PoseTrack track_camera(Map<S, B>& map, const Frame<S, B>& frame, const SystemParams<S>& params, const Norm& norm,
@@ -191,7 +213,8 @@ PoseTrack track_camera(Map<S, B>& map, const Frame<S, B>& frame, const SystemPar
   const SE3<S> T_volume_camera = map.background.visit([&](const auto& background) {
     return track_in_volume(background, frame.points, &frame.associations.image(0), in_volume,
                            scaled_norm(norm, background.voxel_size()),
-                           alignment_params(params, params.background_integration.max_weight), solver,
+                           camera_alignment_params(params, frame.points.width(), frame.points.height()),
+                           camera_solver(solver, params),
                            params.retry_tracking, judge, t, workspace ? workspace->camera_cache : local,
                            background.backend());
   });

@@ -359,4 +359,13 @@ Solver refined(const Solver& solver) {
     return solver;
 }
 
+/// `solver`, stopping once its undamped step is shorter than `step` where it
+/// has that stop (LevenbergMarquardtParams::converged_step; 0 turns it
+/// off), unchanged otherwise (a user's solver decides for itself).
+template <class Solver>
+Solver with_converged_step(Solver solver, double step) {
+  if constexpr (requires { solver.params.converged_step = step; }) solver.params.converged_step = step;
+  return solver;
+}
+
 }  // namespace emfusion
