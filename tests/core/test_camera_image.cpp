@@ -1,5 +1,6 @@
-// Pinhole projection and back-projection, images across backends, and the
-// parallel primitives, for every scalar and backend.
+// Pinhole projection and back-projection, images across backends, the
+// parallel primitives, and pixel boxes (projected_box, for_each_pixel_in),
+// for every scalar and backend.
 #include <cmath>
 #include <stdexcept>
 #include <vector>
@@ -7,6 +8,8 @@
 #include "emfusion/core/camera.hpp"
 #include "emfusion/core/image.hpp"
 #include "emfusion/core/parallel.hpp"
+#include "emfusion/core/pixel_box.hpp"
+#include "emfusion/core/se3.hpp"
 #include "support/catch.hpp"
 #include "support/configs.hpp"
 
@@ -22,6 +25,12 @@ struct BackProjectThenProject {
     const S depth = S(0.5) + S(0.01) * S(i % 97);
     out[i] = camera.project(camera.back_project(S(u), S(v), depth));
   }
+};
+
+/// Marks pixel i.
+struct Mark {
+  ImageView<int> out;
+  EMF_HD void operator()(int i) const { out[i] += 1; }
 };
 
 struct Square {
@@ -88,4 +97,67 @@ TEMPLATE_LIST_TEST_CASE("Images copy between backends and reduce", "[core]", emf
 
   CHECK_THROWS_AS((Image<float, Host>::from_host(3, 3, std::vector<float>(8))), std::invalid_argument);
   CHECK_THROWS_AS((Image<float, B>{-1, 3}), std::invalid_argument);
+}
+
+TEST_CASE("projected_box holds every pixel a box can project to, and little more", "[core]") {
+  using S = double;
+  const PinholeCamera<S> camera;  // 640x480, f = 525
+  const Vec3<S> lo = Vec3<S>::zero(), hi = vec3(S(0.4), S(0.3), S(0.5));
+  // Box poses in the camera: ahead, off to a side (partly outside the
+  // image), turned, and far.
+  const std::vector<SE3<S>> poses{
+      SE3<S>::translation(vec3(S(-0.2), S(-0.15), S(1))),
+      SE3<S>::translation(vec3(S(0.6), S(0.1), S(0.9))),
+      SE3<S>::exp(Vec6<S>{{-0.1, 0.0, 1.2, 0.3, -0.5, 0.2}}),
+      SE3<S>::translation(vec3(S(0), S(0), S(6)))};
+  for (const SE3<S>& T : poses) {
+    const PixelBox box = projected_box(camera, T, lo, hi);
+    REQUIRE_FALSE(box.empty());
+    CHECK(box.x0 >= 0);
+    CHECK(box.y0 >= 0);
+    CHECK(box.x1 <= camera.width);
+    CHECK(box.y1 <= camera.height);
+    // Every point of the box (a 21^3 lattice, corners included) that lands
+    // on a pixel lands inside; the extremes lie within 3 pixels of the edges.
+    int u_min = 1 << 30, u_max = -1, v_min = 1 << 30, v_max = -1;
+    bool all_inside = true;
+    for (int i = 0; i <= 20; ++i)
+      for (int j = 0; j <= 20; ++j)
+        for (int k = 0; k <= 20; ++k) {
+          const Vec3<S> p = T * vec3(hi.x() * i / 20, hi.y() * j / 20, hi.z() * k / 20);
+          const Vec2<S> uv = camera.project(p);
+          const int u = int(std::floor(uv.x() + 0.5)), v = int(std::floor(uv.y() + 0.5));
+          u_min = std::min(u_min, u), u_max = std::max(u_max, u);
+          v_min = std::min(v_min, v), v_max = std::max(v_max, v);
+          if (camera.contains(uv.x(), uv.y())) all_inside = all_inside && box.contains(u, v);
+        }
+    CHECK(all_inside);
+    CHECK(std::max(u_min, 0) - box.x0 <= 3);
+    CHECK(std::max(v_min, 0) - box.y0 <= 3);
+    CHECK(box.x1 - 1 - std::min(u_max, camera.width - 1) <= 3);
+    CHECK(box.y1 - 1 - std::min(v_max, camera.height - 1) <= 3);
+  }
+  // A box reaching behind the camera may cover any pixel; one wholly off to
+  // a side covers none.
+  const PixelBox around = projected_box(camera, SE3<S>::translation(vec3(S(-0.2), S(-0.15), S(-0.1))), lo, hi);
+  CHECK((around.x0 == 0 && around.y0 == 0 && around.x1 == camera.width && around.y1 == camera.height));
+  CHECK(projected_box(camera, SE3<S>::translation(vec3(S(5), S(0), S(1))), lo, hi).empty());
+}
+
+TEMPLATE_LIST_TEST_CASE("for_each_pixel_in visits each pixel of a box once and no other", "[core]",
+                        emfusion::test::AllConfigs) {
+  using B = typename TestType::Backend;
+  Image<int, B> marks(13, 9, 0, B{});
+  const PixelBox box{3, 2, 11, 7};
+  for_each_pixel_in(B{}, box, marks.width(), Mark{marks.view()});
+  for_each_pixel_in(B{}, PixelBox{5, 5, 5, 8}, marks.width(), Mark{marks.view()});  // empty
+  const std::vector<int> m = marks.to_host();
+  int wrong = 0;
+  for (int v = 0; v < 9; ++v)
+    for (int u = 0; u < 13; ++u) wrong += m[std::size_t(v * 13 + u)] != (box.contains(u, v) ? 1 : 0);
+  CHECK(wrong == 0);
+  CHECK(box.grown(5, 1, 13, 9).x0 == 0);
+  CHECK(box.grown(5, 1, 13, 9).x1 == 13);
+  CHECK(box.grown(5, 1, 13, 9).y0 == 1);
+  CHECK(box.grown(5, 1, 13, 9).y1 == 8);
 }

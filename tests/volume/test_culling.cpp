@@ -1,6 +1,8 @@
 // Work the volume kernels skip must be work that changes nothing: the
 // frustum and far-plane range of an integrated voxel column, the silhouette
-// guard's minimum filter, and rays cast only where asked, up to a depth.
+// guard's minimum filter, rays cast only where asked, up to a depth, and an
+// object's rays marched only where its foreground is (majority_box).
+#include <algorithm>
 #include <cmath>
 #include <limits>
 #include <random>
@@ -160,6 +162,69 @@ TEMPLATE_LIST_TEST_CASE("Rays cast only where asked and up to a depth find the f
   const auto wrong = Image<S, Host>(camera.width + 1, camera.height, S(1)).template to<B>();
   CHECK_THROWS_WITH(raycast(volume, camera, pose, part, {}, static_cast<const ForegroundCounts<S, B>*>(nullptr), &wrong),
                     EMF_CONTAINS("ray_end image is 201x150"));
+}
+
+namespace {
+/// Foreground counts by voxel centre: Fg where x < x_fg (volume frame), Bg
+/// elsewhere, every voxel counted once.
+template <class S>
+struct SlabCounts {
+  ForegroundView<S, float> counts;
+  S x_fg;
+  EMF_HD void operator()(std::int64_t i) const {
+    const S x = (S(i % counts.nx) + S(0.5)) * counts.voxel_size;
+    counts.fg[i] = x < x_fg ? 1.0f : 0.0f;
+    counts.bg[i] = x < x_fg ? 0.0f : 1.0f;
+  }
+};
+}  // namespace
+
+TEMPLATE_LIST_TEST_CASE("An object's rays march only near its foreground and draw what the whole march draws",
+                        "[volume]", emfusion::test::AllConfigs) {
+  using S = typename TestType::Scalar;
+  using B = typename TestType::Backend;
+  const auto camera = test::small_camera<S>();
+  const TsdfVolume<S, B> volume = fused_sphere<S>().template to<B>();
+  ForegroundCounts<S, B> counts(volume.dims(), volume.voxel_size());
+  REQUIRE(counts.majority_box().empty());  // nothing counted: p_fg = 1/2 everywhere
+  // The sphere's cap at x < -0.1 m (volume x < 0.22 m) is the object.
+  for_each_index(B{}, std::int64_t(volume.voxel_count()), SlabCounts<S>{counts.view(), S(0.22)});
+  const VoxelBox box = counts.majority_box();
+  CHECK(box.lo[0] == 0);
+  CHECK(box.hi[0] == 22);
+  CHECK((box.lo[1] == 0 && box.hi[1] == 64 && box.lo[2] == 0 && box.hi[2] == 64));
+
+  const SE3<S> pose = sim::look_at<S>(vec3(S(-0.9), S(-0.5), S(0.3)), Vec3<S>::zero(), vec3(S(0), S(0), S(1)));
+  RaycastParams<S> boxed, whole;
+  boxed.min_foreground = S(0.5);      // p_fg > 1/2 only inside the majority box
+  whole.min_foreground = S(0.49999);  // no box: every ray marches the whole grid
+  RaycastResult<S, B> a, b;
+  raycast(volume, camera, pose, a, boxed, &counts);
+  raycast(volume, camera, pose, b, whole, &counts);
+  const auto hit_a = a.hit.to_host(), hit_b = b.hit.to_host();
+  const auto depth_a = a.depth.to_host(), depth_b = b.depth.to_host();
+  std::size_t hits = 0, differ = 0;
+  double worst = 0;
+  for (std::size_t i = 0; i < hit_a.size(); ++i) {
+    hits += hit_b[i];
+    if (hit_a[i] != hit_b[i]) {
+      ++differ;
+      continue;
+    }
+    if (hit_a[i]) worst = std::max(worst, std::abs(double(depth_a[i]) - double(depth_b[i])));
+  }
+  CHECK(hits > 1000);
+  CHECK(differ <= 2);  // a crossing exactly where p_fg lies in (0.49999, 0.5]
+  CHECK(worst < 1e-4);  // another march phase: the same crossing, refined
+
+  // Counts changed through a mutable view: the box is computed afresh.
+  for_each_index(B{}, std::int64_t(volume.voxel_count()), SlabCounts<S>{counts.view(), S(1)});
+  CHECK(counts.majority_box().hi[0] == 64);
+  counts.reset();
+  CHECK(counts.majority_box().empty());
+  raycast(volume, camera, pose, a, boxed, &counts);
+  const auto none = a.hit.to_host();
+  CHECK(std::count(none.begin(), none.end(), std::uint8_t(1)) == 0);
 }
 
 TEMPLATE_LIST_TEST_CASE("Free space stored a few ulps below the truncation renders as free space", "[volume]",

@@ -13,6 +13,7 @@
 #include <cmath>
 
 #include "emfusion/core/image.hpp"
+#include "emfusion/core/pixel_box.hpp"
 #include "emfusion/core/parallel.hpp"
 #include "emfusion/core/se3.hpp"
 #include "emfusion/robust/norms.hpp"
@@ -66,12 +67,6 @@ EMF_HD inline S kinect_depth_sigma(S z) {
   const S d = z - S(0.4);
   return S(0.0012) + S(0.0019) * d * d;
 }
-
-/// A rectangle of pixels, [x0, x1) x [y0, y1); empty when x1 <= x0 or y1 <= y0.
-struct PixelBox {
-  int x0 = 0, y0 = 0, x1 = 0, y1 = 0;
-  EMF_HD bool empty() const { return x1 <= x0 || y1 <= y0; }
-};
 
 namespace detail {
 template <class S>

@@ -3,7 +3,9 @@
 // detected mask (Fg) or outside it (Bg). Their ratio p_fg = Fg / (Fg + Bg)
 // says whether a voxel belongs to the object: the E-step multiplies the
 // object's likelihood by it, and raycasting draws only voxels with
-// p_fg > 0.5. Voxels never counted have p_fg = 1/2: no evidence either way.
+// p_fg > 0.5, only within the box of the voxels where Fg > Bg
+// (majority_box). Voxels never counted have p_fg = 1/2: no evidence either
+// way.
 #pragma once
 
 #include <cmath>
@@ -66,6 +68,37 @@ struct ForegroundView {
   }
 };
 
+/// A box of voxel indices, [lo, hi) per axis; empty when any hi <= lo.
+struct VoxelBox {
+  Vec3i lo{{0, 0, 0}}, hi{{0, 0, 0}};
+  EMF_HD bool empty() const { return !(hi[0] > lo[0] && hi[1] > lo[1] && hi[2] > lo[2]); }
+};
+
+namespace detail {
+/// The one-voxel box of voxel i where Fg > Bg, else an empty one.
+template <class S, class Count>
+struct MajorityVoxel {
+  ForegroundView<S, const Count> counts;
+  EMF_HD VoxelBox operator()(std::int64_t i) const {
+    if (!(S(counts.fg[i]) > S(counts.bg[i]))) return VoxelBox{};
+    const int x = int(i % counts.nx), y = int((i / counts.nx) % counts.ny), z = int(i / (std::int64_t(counts.nx) * counts.ny));
+    return VoxelBox{Vec3i{{x, y, z}}, Vec3i{{x + 1, y + 1, z + 1}}};
+  }
+};
+struct UniteVoxelBoxes {
+  EMF_HD VoxelBox operator()(const VoxelBox& a, const VoxelBox& b) const {
+    if (a.empty()) return b;
+    if (b.empty()) return a;
+    VoxelBox u;
+    for (int k = 0; k < 3; ++k) {
+      u.lo[k] = a.lo[k] < b.lo[k] ? a.lo[k] : b.lo[k];
+      u.hi[k] = a.hi[k] > b.hi[k] ? a.hi[k] : b.hi[k];
+    }
+    return u;
+  }
+};
+}  // namespace detail
+
 /// The counts of one object volume on backend B.
 template <class S, Backend B = Host, class Count = float>
 class ForegroundCounts {
@@ -86,14 +119,36 @@ class ForegroundCounts {
   void reset() {
     thrust::fill(backend_.policy(), fg_.begin(), fg_.end(), Count(0));
     thrust::fill(backend_.policy(), bg_.begin(), bg_.end(), Count(0));
+    majority_known_ = false;
   }
 
   const Vec3i& dims() const { return dims_; }
   S voxel_size() const { return voxel_size_; }
   std::size_t memory_bytes() const { return 2 * fg_.size() * sizeof(Count); }
 
-  View view() { return make<View>(raw(fg_), raw(bg_)); }
+  /// A view that may change the counts: majority_box is computed afresh
+  /// after it (read through the const view() to keep it).
+  View view() {
+    majority_known_ = false;
+    return make<View>(raw(fg_), raw(bg_));
+  }
   ConstView view() const { return make<ConstView>(raw(fg_), raw(bg_)); }
+
+  /// The smallest box of voxel indices, [lo, hi) per axis, holding every
+  /// voxel with Fg > Bg (p_fg > 1/2); empty (lo = hi = 0) when there is
+  /// none. Where a point's p_fg (ForegroundView::probability) exceeds 1/2,
+  /// one of its eight voxels is in it: raycasting an object marches only
+  /// there. One reduction over the grid, kept until the counts may have
+  /// changed (a mutable view(), reset, assign_from_host); not to be called
+  /// from two threads at once.
+  const VoxelBox& majority_box() const {
+    if (!majority_known_) {
+      majority_ = transform_reduce_index(backend_, std::int64_t(fg_.size()),
+                                         detail::MajorityVoxel<S, Count>{view()}, VoxelBox{}, detail::UniteVoxelBoxes{});
+      majority_known_ = true;
+    }
+    return majority_;
+  }
 
   /// Fg and Bg counts as host vectors (x-fastest), synchronising first.
   std::vector<Count> fg_to_host() const { return to_host(fg_); }
@@ -107,6 +162,7 @@ class ForegroundCounts {
     backend_.synchronize();
     thrust::copy(fg.begin(), fg.end(), fg_.begin());
     thrust::copy(bg.begin(), bg.end(), bg_.begin());
+    majority_known_ = false;
   }
 
  private:
@@ -135,6 +191,8 @@ class ForegroundCounts {
   B backend_{};
   typename B::template Vector<Count> fg_;
   typename B::template Vector<Count> bg_;
+  mutable VoxelBox majority_{};
+  mutable bool majority_known_ = false;
 };
 
 namespace detail {

@@ -37,6 +37,7 @@
 #include "emfusion/core/error.hpp"
 #include "emfusion/core/image.hpp"
 #include "emfusion/core/parallel.hpp"
+#include "emfusion/core/pixel_box.hpp"
 #include "emfusion/core/se3.hpp"
 #include "emfusion/volume/tsdf_volume.hpp"
 
@@ -288,12 +289,15 @@ struct IntegrationWorkspace {
 
 namespace detail {
 /// Checks integrate()'s arguments, computes the per-pixel images the chosen
-/// refinements need (into `ws`) and returns the per-voxel update over them:
+/// refinements need (into `ws`) within `box`, the pixels the volume's
+/// voxels can project to (projected_box; elsewhere the images are not read
+/// and keep what they held), and returns the per-voxel update over them:
 /// the part of integration that does not depend on the volume's layout.
 template <class S, Backend B>
 VoxelUpdate<S> prepare_voxel_update(const Image<S, B>& depth, const PinholeCamera<S>& camera,
                                     const Image<S, B>* weights, const IntegrationParams<S>& params, S voxel_size,
-                                    S truncation, const B& backend, IntegrationWorkspace<S, B>& ws, const char* where) {
+                                    S truncation, const B& backend, IntegrationWorkspace<S, B>& ws, const char* where,
+                                    const PixelBox& box) {
   camera.validate(where);
   detail::require_image(depth.view(), camera.width, camera.height, where, "depth image");
   if (weights) detail::require_image(weights->view(), depth.width(), depth.height(), where, "weight image");
@@ -309,18 +313,21 @@ VoxelUpdate<S> prepare_voxel_update(const Image<S, B>& depth, const PinholeCamer
   ImageView<const S> incidence, near_depth;
   if (params.point_to_plane || params.weight_by_incidence) {
     Image<S, B>& image = sized(ws.incidence);
-    for_each_index(backend, depth.size(),
-                   detail::IncidencePixel<S>{depth.view(), camera, params.min_incidence_weight, image.view()});
+    for_each_pixel_in(backend, box, depth.width(),
+                      detail::IncidencePixel<S>{depth.view(), camera, params.min_incidence_weight, image.view()});
     incidence = std::as_const(image).view();
   }
   if (params.silhouette_guard > S(0)) {
     Image<S, B>& rows = sized(ws.rows);
     Image<S, B>& near = sized(ws.near_depth);
     const S lateral = params.silhouette_guard * voxel_size * std::max(camera.fx, camera.fy);
-    for_each_index(backend, depth.size(),
-                   detail::NearestDepthPass<S>{depth.view(), depth.view(), rows.view(), lateral, 1, 0});
-    for_each_index(backend, depth.size(),
-                   detail::NearestDepthPass<S>{depth.view(), std::as_const(rows).view(), near.view(), lateral, 0, 1});
+    // The column pass reads the row pass up to max_radius rows away.
+    const PixelBox row_box =
+        box.grown(0, detail::NearestDepthPass<S>::max_radius, depth.width(), depth.height());
+    for_each_pixel_in(backend, row_box, depth.width(),
+                      detail::NearestDepthPass<S>{depth.view(), depth.view(), rows.view(), lateral, 1, 0});
+    for_each_pixel_in(backend, box, depth.width(),
+                      detail::NearestDepthPass<S>{depth.view(), std::as_const(rows).view(), near.view(), lateral, 0, 1});
     near_depth = std::as_const(near).view();
   }
   return VoxelUpdate<S>{
@@ -338,11 +345,12 @@ void integrate(TsdfVolume<S, B, Store>& volume, const Image<S, B>& depth, const 
                const SE3<S>& T_world_camera, const Image<S, B>* weights = nullptr,
                const IntegrationParams<S>& params = {}, IntegrationWorkspace<S, B>* workspace = nullptr) {
   IntegrationWorkspace<S, B> local;
-  const detail::VoxelUpdate<S> update =
-      detail::prepare_voxel_update(depth, camera, weights, params, volume.voxel_size(), volume.truncation(),
-                                   volume.backend(), workspace ? *workspace : local, "integrate");
-  detail::IntegrateColumn<S, Store> f{volume.view(), update, T_world_camera.inverse() * volume.pose(),
-                                      std::numeric_limits<S>::infinity()};
+  const SE3<S> T_camera_volume = T_world_camera.inverse() * volume.pose();
+  const detail::VoxelUpdate<S> update = detail::prepare_voxel_update(
+      depth, camera, weights, params, volume.voxel_size(), volume.truncation(), volume.backend(),
+      workspace ? *workspace : local, "integrate",
+      projected_box(camera, T_camera_volume, Vec3<S>::zero(), volume.view().extent()));
+  detail::IntegrateColumn<S, Store> f{volume.view(), update, T_camera_volume, std::numeric_limits<S>::infinity()};
   // The far plane pays on the CPU, where voxels are visited one by one; on a
   // device the reduction's round trip costs more than the voxels it skips.
   if constexpr (!B::is_device) {

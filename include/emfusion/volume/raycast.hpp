@@ -23,6 +23,7 @@
 // counts are per voxel of a dense grid: only dense volumes take them.
 #pragma once
 
+#include <algorithm>
 #include <cmath>
 #include <concepts>
 #include <cstdint>
@@ -31,6 +32,7 @@
 #include "emfusion/core/camera.hpp"
 #include "emfusion/core/image.hpp"
 #include "emfusion/core/parallel.hpp"
+#include "emfusion/core/pixel_box.hpp"
 #include "emfusion/core/se3.hpp"
 #include "emfusion/volume/foreground.hpp"
 #include "emfusion/volume/sparse_tsdf_volume.hpp"
@@ -139,6 +141,39 @@ void check_foreground(const SparseTsdfVolume<S, B, Store>&, const ForegroundCoun
                   "foreground counts are per voxel of a dense TsdfVolume; a SparseTsdfVolume takes none (pass nullptr)");
 }
 
+/// Dense: the part of the grid where a surface may be drawn, [lo, hi] in
+/// the volume's frame: the whole grid, or with foreground counts and
+/// min_foreground >= 1/2 the voxels of their majority_box and the points
+/// whose samples reach them (half a voxel beyond their centres' box each
+/// way): only there is p_fg > 1/2. A ray's march starts where it enters
+/// that box instead of the grid's face, which finds the same crossings
+/// (one exactly on the entry plane aside) from other sample positions.
+/// Sets `bounded`; false when nothing can be drawn.
+template <class S, Backend B, class Store>
+bool march_box(const TsdfVolume<S, B, Store>& volume, const ForegroundCounts<S, B>* foreground,
+               const RaycastParams<S>& params, bool& bounded, Vec3<S>& lo, Vec3<S>& hi) {
+  bounded = true;
+  lo = Vec3<S>::zero(), hi = volume.view().extent();
+  if (!foreground || !(params.min_foreground >= S(0.5))) return true;
+  const VoxelBox& box = foreground->majority_box();
+  if (box.empty()) return false;
+  const S vs = volume.voxel_size();
+  for (int a = 0; a < 3; ++a) {
+    lo[a] = std::max(lo[a], (S(box.lo[a]) - S(0.5)) * vs);
+    hi[a] = std::min(hi[a], (S(box.hi[a]) + S(0.5)) * vs);
+  }
+  return true;
+}
+
+/// Sparse: no box (a background map surrounds its camera; it takes no
+/// foreground counts).
+template <class S, Backend B, class Store>
+bool march_box(const SparseTsdfVolume<S, B, Store>&, const ForegroundCounts<S, B>*, const RaycastParams<S>&,
+               bool& bounded, Vec3<S>&, Vec3<S>&) {
+  bounded = false;
+  return true;
+}
+
 // ---- the march, written once -------------------------------------------------
 
 template <class S, class View>
@@ -153,6 +188,8 @@ struct RaycastPixel {
   ImageView<std::uint8_t> hit;
   ForegroundView<S, const float> foreground;  // empty: every crossing counts
   ImageView<const S> ray_end;                 // empty: every pixel; else rays only where > 0, ending there
+  bool bounded = false;  // march only inside [march_lo, march_hi] (march_box)
+  Vec3<S> march_lo{}, march_hi{};
 
   EMF_HD void miss(int i) const {
     const S nan = std::numeric_limits<S>::quiet_NaN();
@@ -173,7 +210,8 @@ struct RaycastPixel {
     const Vec3<S> dir = T_volume_camera.rotate(ray_cam);
     const S end_depth = !ray_end.empty() && ray_end[i] < params.max_depth ? ray_end[i] : params.max_depth;
     S t = params.min_depth / ray_cam.z(), t_end = end_depth / ray_cam.z();
-    if (!ray_range(volume, origin, dir, t, t_end)) {
+    if (!ray_range(volume, origin, dir, t, t_end) ||
+        (bounded && !clip_ray_to_box(origin, dir, march_lo, march_hi, t, t_end))) {
       miss(i);
       return;
     }
@@ -262,13 +300,28 @@ void raycast(const Volume& volume, const PinholeCamera<S>& camera, const SE3<S>&
   if (foreground) detail::check_foreground(volume, *foreground);
   if (ray_end) detail::require_image(ray_end->view(), camera.width, camera.height, "raycast", "ray_end image");
   out.resize(camera.width, camera.height, volume.backend());
+  const SE3<S> T_volume_camera = volume.pose().inverse() * T_world_camera;
   detail::RaycastPixel<S, decltype(volume.view())> f{
-      volume.view(),      camera,         volume.pose().inverse() * T_world_camera,
+      volume.view(),      camera,         T_volume_camera,
       params,             out.depth.view(), out.vertices.view(),
       out.normals.view(), out.hit.view(), {}, {}};
   if (ray_end) f.ray_end = ray_end->view();
   if (foreground) f.foreground = foreground->view();
-  for_each_index(volume.backend(), camera.width * camera.height, f);
+  // Rays are cast only where they can meet the part of the volume where a
+  // surface may be drawn (march_box: an object's is a small part of the
+  // frame); every other pixel is a miss.
+  const bool drawable = detail::march_box(volume, foreground, params, f.bounded, f.march_lo, f.march_hi);
+  const PixelBox box = !drawable   ? PixelBox{}
+                       : f.bounded ? projected_box(camera, T_volume_camera.inverse(), f.march_lo, f.march_hi)
+                                   : PixelBox::whole(camera.width, camera.height);
+  if (box.area() < camera.pixel_count()) {
+    const S nan = std::numeric_limits<S>::quiet_NaN();
+    out.depth.fill(S(0));
+    out.vertices.fill(Vec3<S>::constant(nan));
+    out.normals.fill(Vec3<S>::constant(nan));
+    out.hit.fill(0);
+  }
+  for_each_pixel_in(volume.backend(), box, camera.width, f);
 }
 
 }  // namespace emfusion

@@ -46,6 +46,7 @@
 #include "emfusion/core/image.hpp"
 #include "emfusion/core/math.hpp"
 #include "emfusion/core/parallel.hpp"
+#include "emfusion/core/pixel_box.hpp"
 #include "emfusion/core/se3.hpp"
 #include "emfusion/volume/detail/sparse_blocks.hpp"
 #include "emfusion/volume/detail/trilinear.hpp"
@@ -592,7 +593,8 @@ SparseIntegration integrate(SparseTsdfVolume<S, B, Store>& volume, const Image<S
   SparseIntegrationWorkspace<S, B>& ws = workspace ? *workspace : local;
   const B& backend = volume.backend();
   const detail::VoxelUpdate<S> update = detail::prepare_voxel_update(
-      depth, camera, weights, params, volume.voxel_size(), volume.truncation(), backend, ws.images, "integrate");
+      depth, camera, weights, params, volume.voxel_size(), volume.truncation(), backend, ws.images, "integrate",
+      PixelBox::whole(camera.width, camera.height));
   SparseIntegration result;
   result.allocation = allocate_blocks(volume, depth, camera, T_world_camera, weights, &ws);
   const SE3<S> T_camera_volume = T_world_camera.inverse() * volume.pose();

@@ -1,0 +1,90 @@
+// Rectangles of pixels, and the work a per-pixel pass can leave out with
+// them: an object's volume covers a small part of the frame, so the passes
+// that concern only that volume (its raycast, the images its integration
+// reads) need only the pixels its box projects to (projected_box), walked
+// by for_each_pixel_in.
+#pragma once
+
+#include <algorithm>
+#include <cmath>
+
+#include "emfusion/core/backend.hpp"
+#include "emfusion/core/camera.hpp"
+#include "emfusion/core/host_device.hpp"
+#include "emfusion/core/math.hpp"
+#include "emfusion/core/parallel.hpp"
+#include "emfusion/core/se3.hpp"
+
+namespace emfusion {
+
+/// A rectangle of pixels, [x0, x1) x [y0, y1); empty when x1 <= x0 or y1 <= y0.
+struct PixelBox {
+  int x0 = 0, y0 = 0, x1 = 0, y1 = 0;
+  EMF_HD bool empty() const { return x1 <= x0 || y1 <= y0; }
+  EMF_HD int width() const { return empty() ? 0 : x1 - x0; }
+  EMF_HD int height() const { return empty() ? 0 : y1 - y0; }
+  EMF_HD int area() const { return width() * height(); }
+  EMF_HD bool contains(int u, int v) const { return u >= x0 && u < x1 && v >= y0 && v < y1; }
+
+  /// Every pixel of a width x height image.
+  static PixelBox whole(int width, int height) { return PixelBox{0, 0, width, height}; }
+  /// This box grown by `dx` columns and `dy` rows each way, within a
+  /// width x height image.
+  PixelBox grown(int dx, int dy, int width, int height) const {
+    if (empty()) return *this;
+    return PixelBox{std::max(0, x0 - dx), std::max(0, y0 - dy), std::min(width, x1 + dx), std::min(height, y1 + dy)};
+  }
+};
+
+/// The pixels of `camera` whose rays can meet the box [lo, hi] (a volume's
+/// extent in its own frame) seen at T_camera_box: the rectangle around the
+/// projections of its eight corners, one pixel wider each way (rounding),
+/// within the image. A box with a corner closer to the camera's plane than
+/// `min_z` (or behind it) may cover any pixel: the whole image. Exact for
+/// what it promises: a ray outside the rectangle misses the box, and a point
+/// of the box projects (rounded to the nearest pixel) inside it.
+template <class S>
+PixelBox projected_box(const PinholeCamera<S>& camera, const SE3<S>& T_camera_box, const Vec3<S>& lo,
+                       const Vec3<S>& hi, S min_z = S(1e-3)) {
+  const PixelBox whole = PixelBox::whole(camera.width, camera.height);
+  double u_min = 1e300, u_max = -1e300, v_min = 1e300, v_max = -1e300;
+  for (int k = 0; k < 8; ++k) {
+    const Vec3<S> corner = vec3(k & 1 ? hi.x() : lo.x(), k & 2 ? hi.y() : lo.y(), k & 4 ? hi.z() : lo.z());
+    const Vec3<S> p = T_camera_box * corner;
+    if (!(p.z() >= min_z) || !std::isfinite(double(p.x())) || !std::isfinite(double(p.y()))) return whole;
+    const double u = double(camera.fx) * double(p.x()) / double(p.z()) + double(camera.cx);
+    const double v = double(camera.fy) * double(p.y()) / double(p.z()) + double(camera.cy);
+    u_min = std::min(u_min, u), u_max = std::max(u_max, u);
+    v_min = std::min(v_min, v), v_max = std::max(v_max, v);
+  }
+  // Outside the image on one side: nothing to do (an empty box).
+  if (u_max < -1.0 || v_max < -1.0 || u_min > camera.width || v_min > camera.height) return PixelBox{};
+  const auto lower = [](double x, int size) { return int(std::clamp(std::floor(x) - 1.0, 0.0, double(size))); };
+  const auto upper = [](double x, int size) { return int(std::clamp(std::ceil(x) + 2.0, 0.0, double(size))); };
+  return PixelBox{lower(u_min, camera.width), lower(v_min, camera.height), upper(u_max, camera.width),
+                  upper(v_max, camera.height)};
+}
+
+namespace detail {
+/// f(i) for the image index i of every pixel of `box` (image `width` wide).
+template <class F>
+struct PixelsInBox {
+  F f;
+  PixelBox box;
+  int width;
+  EMF_HD void operator()(int k) const {
+    const int bw = box.x1 - box.x0;
+    f((box.y0 + k / bw) * width + box.x0 + k % bw);
+  }
+};
+}  // namespace detail
+
+/// Calls f(i) on the backend for the image index i (row-major, `width`
+/// pixels a row) of every pixel in `box`; nothing for an empty box.
+template <Backend B, class F>
+void for_each_pixel_in(const B& backend, const PixelBox& box, int width, F f) {
+  if (box.empty()) return;
+  for_each_index(backend, box.area(), detail::PixelsInBox<F>{f, box, width});
+}
+
+}  // namespace emfusion
