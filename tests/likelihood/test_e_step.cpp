@@ -131,38 +131,47 @@ TEMPLATE_LIST_TEST_CASE("Unobserved space inside a volume counts as truncated, n
   }
 }
 
+/// A wall 2 m ahead (the background, fused before the box arrived) and a
+/// box 0.6 m in front of it (an object whose volume saw only the box, every
+/// voxel foreground), with the frame of both rendered: points and labels
+/// (0 wall, 1 box).
+template <class S, class B>
+struct OccludedWall {
+  TsdfVolume<S, B> background{emfusion::test::cube_around(vec3(S(0), S(0), S(1.5)), 96, S(0.03))};
+  TsdfVolume<S, B> object{emfusion::test::cube_around(vec3(S(0), S(0), S(1.4)), 64, S(0.01))};
+  ForegroundCounts<S, B> counts{object.dims(), object.voxel_size()};
+  Image<Vec3<S>, B> points;
+  Image<int, B> labels;
+
+  OccludedWall() {
+    const PinholeCamera<S> camera = emfusion::test::small_camera<S>();
+    sim::Scene<S> wall, box, both;
+    const auto plane =
+        sim::make_plane(sim::look_at(vec3(S(0), S(0), S(2)), Vec3<S>::zero(), vec3(S(0), S(-1), S(0))));
+    const auto cube = sim::make_box(SE3<S>::translation(vec3(S(0), S(0), S(1.4))), Vec3<S>::constant(S(0.15)));
+    wall.add(plane);
+    box.add(cube);
+    both.add(plane);
+    both.add(cube);
+    const std::vector<SE3<S>> views{SE3<S>::identity(), SE3<S>::translation(vec3(S(0.05), S(0), S(0))),
+                                    SE3<S>::translation(vec3(S(-0.05), S(0.03), S(0)))};
+    emfusion::test::fuse_views(background, wall, camera, views, IntegrationParams<S>{});
+    for_each_index(B{}, object.voxel_count(), FillVoxels<S>{object.view(), counts.view(), S(0), 1.0f, 0.0f});
+    // (FillVoxels set the SDF too: fuse the box into the reset volume.)
+    object.reset();
+    emfusion::test::fuse_views(object, box, camera, views, IntegrationParams<S>{});
+    Image<S, B> depth;
+    sim::render_depth(both, camera, SE3<S>::identity(), depth, &labels);
+    back_project(depth, camera, points);
+  }
+};
+
 TEMPLATE_LIST_TEST_CASE("An occluding object takes the association of the pixels it covers", "[likelihood]",
                         emfusion::test::AllConfigs) {
   using S = typename TestType::Scalar;
   using B = typename TestType::Backend;
-  const PinholeCamera<S> camera = emfusion::test::small_camera<S>();
-  // Background: a wall 2 m ahead. Object: a box 0.6 m in front of it.
-  sim::Scene<S> wall, box, both;
-  const auto plane = sim::make_plane(sim::look_at(vec3(S(0), S(0), S(2)), Vec3<S>::zero(), vec3(S(0), S(-1), S(0))));
-  const auto cube = sim::make_box(SE3<S>::translation(vec3(S(0), S(0), S(1.4))), Vec3<S>::constant(S(0.15)));
-  wall.add(plane);
-  box.add(cube);
-  both.add(plane);
-  both.add(cube);
-  const std::vector<SE3<S>> views{SE3<S>::identity(), SE3<S>::translation(vec3(S(0.05), S(0), S(0))),
-                                  SE3<S>::translation(vec3(S(-0.05), S(0.03), S(0)))};
-  // The background saw the wall before the box arrived; the object volume
-  // (a cube around the box) saw only the box.
-  TsdfVolume<S, B> background(emfusion::test::cube_around(vec3(S(0), S(0), S(1.5)), 96, S(0.03)));
-  emfusion::test::fuse_views(background, wall, camera, views, IntegrationParams<S>{});
-  TsdfVolume<S, B> object(emfusion::test::cube_around(vec3(S(0), S(0), S(1.4)), 64, S(0.01)));
-  emfusion::test::fuse_views(object, box, camera, views, IntegrationParams<S>{});
-  ForegroundCounts<S, B> counts(object.dims(), object.voxel_size());
-  for_each_index(B{}, object.voxel_count(), FillVoxels<S>{object.view(), counts.view(), S(0), 1.0f, 0.0f});
-  // (FillVoxels overwrote the SDF: fuse again on top of the reset volume.)
-  object.reset();
-  emfusion::test::fuse_views(object, box, camera, views, IntegrationParams<S>{});
-
-  Image<S, B> depth;
-  Image<int, B> labels;
-  sim::render_depth(both, camera, SE3<S>::identity(), depth, &labels);
-  Image<Vec3<S>, B> points;
-  back_project(depth, camera, points);
+  const OccludedWall<S, B> scene;
+  const auto& [background, object, counts, points, labels] = scene;
   using M = PaperLikelihood<S>;
   std::vector<M> models(2);
   models[0].volume = background.view();
@@ -194,4 +203,56 @@ TEMPLATE_LIST_TEST_CASE("An occluding object takes the association of the pixels
   // object's volume.
   CHECK(box_to_object >= int(0.9 * box_pixels));
   CHECK(wall_to_background >= int(0.99 * wall_pixels));
+}
+
+TEMPLATE_LIST_TEST_CASE("The last E-step of a frame reuses the background's likelihoods when only objects moved",
+                        "[likelihood]", emfusion::test::AllConfigs) {
+  using S = typename TestType::Scalar;
+  using B = typename TestType::Backend;
+  const OccludedWall<S, B> scene;
+  using M = PaperLikelihood<S>;
+  M wall_model, box_model;
+  wall_model.volume = scene.background.view();
+  box_model.volume = scene.object.view();
+  box_model.foreground = scene.counts.view();
+  const std::vector<M> objects{box_model};
+  const SE3<S> T_wall = scene.background.pose().inverse();
+  const auto run = [&](Associations<S, B>& q, const M& background, const SE3<S>& T_background,
+                       const SE3<S>& T_object, bool unchanged) {
+    const std::vector<SE3<S>> poses{T_object};
+    e_step(B{}, scene.points, background, T_background, std::span<const M>(objects), std::span<const SE3<S>>(poses), q,
+           unchanged);
+  };
+  const auto same_images = [](const Associations<S, B>& a, const Associations<S, B>& b) {
+    for (int k = 0; k < 2; ++k)
+      if (a.image(k).to_host() != b.image(k).to_host()) return false;
+    return true;
+  };
+  const SE3<S> T_box = scene.object.pose().inverse();
+  const SE3<S> T_box_moved = SE3<S>::translation(vec3(S(0.02), S(0), S(0))) * T_box;
+
+  Associations<S, B> kept, fresh;
+  run(kept, wall_model, T_wall, T_box, false);
+  // The object moved: the same numbers as an E-step from nothing.
+  run(kept, wall_model, T_wall, T_box_moved, true);
+  run(fresh, wall_model, T_wall, T_box_moved, false);
+  CHECK(same_images(kept, fresh));
+  CHECK(kept.background_likelihood().to_host() == fresh.background_likelihood().to_host());
+  // The background's values were taken from the first call, not sampled
+  // again: a different background model at the same pose changes nothing
+  // while the caller says the background is unchanged (here it lies).
+  M empty_wall = wall_model;
+  TsdfVolume<S, B> unobserved(emfusion::test::cube_around(vec3(S(0), S(0), S(1.5)), 8, S(0.3)));
+  empty_wall.volume = unobserved.view();
+  run(kept, empty_wall, T_wall, T_box, true);
+  Associations<S, B> with_wall;
+  run(with_wall, wall_model, T_wall, T_box, false);
+  CHECK(same_images(kept, with_wall));
+  // The camera moved: the background is evaluated again.
+  const SE3<S> T_wall_moved = T_wall * SE3<S>::translation(vec3(S(0.01), S(0), S(0)));
+  run(kept, empty_wall, T_wall_moved, T_box, true);
+  Associations<S, B> without_wall;
+  run(without_wall, empty_wall, T_wall_moved, T_box, false);
+  CHECK(same_images(kept, without_wall));
+  CHECK_FALSE(same_images(kept, with_wall));
 }

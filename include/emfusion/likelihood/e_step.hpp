@@ -38,7 +38,7 @@ struct NoBackground {};
 template <class S, Backend B, class M, class Objects>
 void run_e_step(const B& backend, const Image<Vec3<S>, B>& points, const M* background,
                 const SE3<S>& T_background_camera, std::span<const Objects> objects,
-                std::span<const SE3<S>> T_object_camera, Associations<S, B>& out);
+                std::span<const SE3<S>> T_object_camera, Associations<S, B>& out, bool background_unchanged);
 }  // namespace detail
 
 /// The E-step's output: one association image per model. Reuse one object
@@ -59,12 +59,21 @@ class Associations {
     while (int(images_.size()) < models) images_.emplace_back(width, height, S(0), backend);
   }
 
+  /// p(u | background) of the last E-step with the background apart
+  /// (before normalisation), and the pose it was computed at: a later
+  /// E-step of the same frame whose only change is objects' poses reuses it
+  /// (e_step's `background_unchanged`).
+  const Image<S, B>& background_likelihood() const { return background_likelihood_; }
+
  private:
   template <class S2, Backend B2, class M, class Objects>
   friend void detail::run_e_step(const B2&, const Image<Vec3<S2>, B2>&, const M*, const SE3<S2>&,
-                                 std::span<const Objects>, std::span<const SE3<S2>>, Associations<S2, B2>&);
+                                 std::span<const Objects>, std::span<const SE3<S2>>, Associations<S2, B2>&, bool);
 
   std::vector<Image<S, B>> images_;
+  Image<S, B> background_likelihood_;
+  SE3<S> background_pose_ = SE3<S>::identity();
+  bool background_kept_ = false;
   // Models, poses and output views as bytes on the backend, so that a kernel
   // can read any number of them without a fixed capacity.
   typename B::template Vector<unsigned char> scratch_;
@@ -105,12 +114,20 @@ struct EStepBackgroundPixel {
   const SE3<S>* T_volume_camera;
   ImageView<S>* out;  ///< the background's first, then one per model
   int model_count;
+  ImageView<S> kept;  ///< p(u | background): written, or read when `reuse`
+  bool reuse;
 
   EMF_HD void operator()(int i) const {
     const Vec3<S> p = points[i];
     const bool valid = std::isfinite(p.x()) && std::isfinite(p.y()) && std::isfinite(p.z());
     S total = S(0);
-    const S l0 = valid ? likelihood_of(background, T_background_camera * p, p) : S(0);
+    S l0;
+    if (reuse) {
+      l0 = kept[i];
+    } else {
+      l0 = valid ? likelihood_of(background, T_background_camera * p, p) : S(0);
+      kept[i] = l0;
+    }
     out[0][i] = l0;
     total += l0;
     for (int k = 0; k < model_count; ++k) {
@@ -122,6 +139,17 @@ struct EStepBackgroundPixel {
     for (int k = 0; k <= model_count; ++k) out[k][i] *= scale;
   }
 };
+
+/// Whether two poses are the same, bit for bit (no tolerance: a pose that
+/// moved at all gives other likelihoods).
+template <class S>
+bool same_bits(const SE3<S>& a, const SE3<S>& b) {
+  const auto ma = a.matrix(), mb = b.matrix();
+  for (int r = 0; r < 3; ++r)
+    for (int c = 0; c < 4; ++c)
+      if (!(ma(r, c) == mb(r, c))) return false;
+  return true;
+}
 
 /// Bytes needed to place `count` objects of T after `offset`, aligned.
 template <class T>
@@ -141,20 +169,28 @@ template <class S, Backend B, class M>
 void e_step(const B& backend, const Image<Vec3<S>, B>& points, std::span<const M> models,
             std::span<const SE3<S>> T_volume_camera, Associations<S, B>& out) {
   detail::run_e_step(backend, points, static_cast<const detail::NoBackground*>(nullptr), SE3<S>::identity(), models,
-                     T_volume_camera, out);
+                     T_volume_camera, out, false);
 }
 
 /// The same with the background's model apart, of a type of its own (e.g.
 /// PaperLikelihood over a SparseTsdfView beside dense objects): image 0 is
 /// the background's, image k + 1 object k's. With models of one type it
 /// gives exactly what the first form gives for {background, objects...}.
+/// `background_unchanged` promises that the background's volume and
+/// `points` are those of the last call with `out`, so that only objects may
+/// have moved: p(u | background) is then taken from that call
+/// (Associations::background_likelihood) when it was computed at the same
+/// T_background_camera, bit for bit, and computed otherwise. The numbers are
+/// the same either way; the system's last E-step of a frame, after the
+/// objects' solves, skips the background's samples with it.
 template <class S, Backend B, class Background, class M>
 void e_step(const B& backend, const Image<Vec3<S>, B>& points, const Background& background,
             const SE3<S>& T_background_camera, std::span<const M> objects, std::span<const SE3<S>> T_object_camera,
-            Associations<S, B>& out) {
+            Associations<S, B>& out, bool background_unchanged = false) {
   static_assert(MeasurementLikelihood<Background, S>, "the background model must satisfy MeasurementLikelihood");
   static_assert(std::is_trivially_copyable_v<Background>, "likelihood models are copied to the backend as bytes");
-  detail::run_e_step(backend, points, &background, T_background_camera, objects, T_object_camera, out);
+  detail::run_e_step(backend, points, &background, T_background_camera, objects, T_object_camera, out,
+                     background_unchanged);
 }
 
 namespace detail {
@@ -164,7 +200,7 @@ namespace detail {
 template <class S, Backend B, class M, class Objects>
 void run_e_step(const B& backend, const Image<Vec3<S>, B>& points, const M* background,
                 const SE3<S>& T_background_camera, std::span<const Objects> objects,
-                std::span<const SE3<S>> T_object_camera, Associations<S, B>& out) {
+                std::span<const SE3<S>> T_object_camera, Associations<S, B>& out, bool background_unchanged) {
   static_assert(MeasurementLikelihood<Objects, S>, "the model type must satisfy MeasurementLikelihood");
   static_assert(std::is_trivially_copyable_v<Objects>, "likelihood models are copied to the backend as bytes");
   require(objects.size() == T_object_camera.size(), "e_step",
@@ -198,9 +234,17 @@ void run_e_step(const B& backend, const Image<Vec3<S>, B>& points, const M* back
   const auto* poses = reinterpret_cast<const SE3<S>*>(base + at_poses);
   auto* images = reinterpret_cast<ImageView<S>*>(base + at_views);
   if constexpr (apart) {
+    const bool reuse = background_unchanged && out.background_kept_ &&
+                       out.background_likelihood_.same_size(points.width(), points.height()) &&
+                       same_bits(out.background_pose_, T_background_camera);
+    if (!out.background_likelihood_.same_size(points.width(), points.height()))
+      out.background_likelihood_ = Image<S, B>(points.width(), points.height(), S(0), backend);
+    out.background_pose_ = T_background_camera;
+    out.background_kept_ = true;
     for_each_index(backend, points.size(),
                    EStepBackgroundPixel<S, M, Objects>{points.view(), *background, T_background_camera, models, poses,
-                                                       images, int(objects.size())});
+                                                       images, int(objects.size()),
+                                                       out.background_likelihood_.view(), reuse});
   } else {
     for_each_index(backend, points.size(), EStepPixel<S, Objects>{points.view(), models, poses, images, n});
   }

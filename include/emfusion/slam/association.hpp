@@ -4,7 +4,9 @@
 // frame.associations ([0] background, [k + 1] Map::objects[k]). The
 // likelihood is any VolumeLikelihood (PaperLikelihood by default), read
 // over a sparse background through its with_volume (measurement_likelihood.hpp);
-// the system runs this stage three times a frame (docs/system.md).
+// the system runs this stage three times a frame (docs/system.md), the last
+// time reusing the background's likelihoods of the second (only objects
+// moved in between).
 #pragma once
 
 #include <span>
@@ -59,11 +61,11 @@ template <class S, Backend B, class Likelihood, class Sparse>
   requires requires { typename Likelihood::template with_volume<typename Sparse::ConstView>; }
 void e_step_over_sparse(Frame<S, B>& frame, const Likelihood& likelihood, const Sparse& background,
                         const SE3<S>& T_background_camera, const std::vector<Likelihood>& objects,
-                        const std::vector<SE3<S>>& poses) {
+                        const std::vector<SE3<S>>& poses, bool background_unchanged) {
   using Model = typename Likelihood::template with_volume<typename Sparse::ConstView>;
   const Model model = bind_volume<S>(rebound<Model>(likelihood), background.view());
   e_step(frame.points.backend(), frame.points, model, T_background_camera, std::span<const Likelihood>(objects),
-         std::span<const SE3<S>>(poses), frame.associations);
+         std::span<const SE3<S>>(poses), frame.associations, background_unchanged);
 }
 
 /// Refuses, naming `where`, a sparse background for a likelihood that has no
@@ -81,7 +83,7 @@ void require_sparse_capable(bool sparse_background, const char* where) {
 /// A likelihood without with_volume cannot read a sparse background.
 template <class S, Backend B, class Likelihood, class Sparse>
 void e_step_over_sparse(Frame<S, B>&, const Likelihood&, const Sparse&, const SE3<S>&, const std::vector<Likelihood>&,
-                        const std::vector<SE3<S>>&) {
+                        const std::vector<SE3<S>>&, bool) {
   require_sparse_capable<S, Likelihood>(true, "associate");
 }
 
@@ -109,17 +111,24 @@ void foreground_weights(const Map<S, B>& map, Frame<S, B>& frame) {
 /// every object at its pose: `likelihood` (the user's configured model) is
 /// pointed at the background's volume and at each object's volume and
 /// foreground counts. With params.use_association off, the ablation weights
-/// of foreground_weights instead.
+/// of foreground_weights instead. `background_unchanged`: since the last
+/// call for this frame only objects have moved (the camera may not have:
+/// then the background is evaluated again), so the background's
+/// likelihoods are reused (e_step); the system says so for its last E-step
+/// of a frame, after the objects' solves.
 template <class S, Backend B, class Likelihood>
   requires VolumeLikelihood<Likelihood, S>
 void associate(const Map<S, B>& map, Frame<S, B>& frame, const Likelihood& likelihood,
-               const SystemParams<S>& params) {
+               const SystemParams<S>& params, bool background_unchanged = false) {
   if (!params.use_association) return foreground_weights(map, frame);
   std::vector<Likelihood> models;
   std::vector<SE3<S>> poses;
   for (const auto& o : map.objects) {
-    models.push_back(bind_volume<S>(likelihood, o->volume().view(), o->foreground().view()));
-    poses.push_back(o->volume().pose().inverse() * map.T_world_camera);
+    // Through the const object: a mutable view of the counts would make
+    // raycasting compute their majority_box afresh.
+    const ObjectModel<S, B>& object = *o;
+    models.push_back(bind_volume<S>(likelihood, object.volume().view(), object.foreground().view()));
+    poses.push_back(object.volume().pose().inverse() * map.T_world_camera);
   }
   const SE3<S> T_background_camera = map.background.pose().inverse() * map.T_world_camera;
   map.background.visit([&](const auto& background) {
@@ -127,9 +136,11 @@ void associate(const Map<S, B>& map, Frame<S, B>& frame, const Likelihood& likel
     if constexpr (std::is_same_v<View, TsdfView<S, const S>>) {
       // A dense background: the same model type as the objects'.
       e_step(frame.points.backend(), frame.points, bind_volume<S>(likelihood, background.view()), T_background_camera,
-             std::span<const Likelihood>(models), std::span<const SE3<S>>(poses), frame.associations);
+             std::span<const Likelihood>(models), std::span<const SE3<S>>(poses), frame.associations,
+             background_unchanged);
     } else {
-      detail::association::e_step_over_sparse(frame, likelihood, background, T_background_camera, models, poses);
+      detail::association::e_step_over_sparse(frame, likelihood, background, T_background_camera, models, poses,
+                                              background_unchanged);
     }
   });
 }

@@ -135,7 +135,7 @@ class System {
       result.relocalized =
           relocalize_objects(map_, frame_, *det, seg, camera_, params_, parts_.object_norm, parts_.solver);
       if (!result.relocalized.empty()) {
-        associate(map_, frame_, parts_.likelihood, params_);
+        associate(map_, frame_, parts_.likelihood, params_, true);  // only objects moved
         render_models(map_, frame_, camera_, params_, render_workspace_);
         seg = frame_.segmentation.to_host();
       }
@@ -255,7 +255,9 @@ class System {
       for (const PoseTrack& t : frame_.object_tracks) result.objects.push_back(t.report);
       result.times.track_objects = clock.lap();
     }
-    associate(map_, frame_, parts_.likelihood, params_);
+    // Since the last E-step only objects moved (or, without objects, the
+    // camera: then the background is evaluated again).
+    associate(map_, frame_, parts_.likelihood, params_, true);
     result.times.e_step += clock.lap();
   }
 
