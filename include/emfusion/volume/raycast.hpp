@@ -190,6 +190,7 @@ struct RaycastPixel {
   ImageView<const S> ray_end;                 // empty: every pixel; else rays only where > 0, ending there
   bool bounded = false;  // march only inside [march_lo, march_hi] (march_box)
   Vec3<S> march_lo{}, march_hi{};
+  PixelBox pixels{};  // rays only here (the march box's projection); every other pixel misses
 
   EMF_HD void miss(int i) const {
     const S nan = std::numeric_limits<S>::quiet_NaN();
@@ -200,11 +201,11 @@ struct RaycastPixel {
   }
 
   EMF_HD void operator()(int i) const {
-    if (!ray_end.empty() && !(ray_end[i] > S(0))) {
+    const int u = i % camera.width, v = i / camera.width;
+    if (!pixels.contains(u, v) || (!ray_end.empty() && !(ray_end[i] > S(0)))) {
       miss(i);
       return;
     }
-    const int u = i % camera.width, v = i / camera.width;
     const Vec3<S> ray_cam = normalized(camera.ray(S(u), S(v)));  // z = cos of the off-axis angle
     const Vec3<S> origin = T_volume_camera.translation();
     const Vec3<S> dir = T_volume_camera.rotate(ray_cam);
@@ -311,17 +312,26 @@ void raycast(const Volume& volume, const PinholeCamera<S>& camera, const SE3<S>&
   // surface may be drawn (march_box: an object's is a small part of the
   // frame); every other pixel is a miss.
   const bool drawable = detail::march_box(volume, foreground, params, f.bounded, f.march_lo, f.march_hi);
-  const PixelBox box = !drawable   ? PixelBox{}
-                       : f.bounded ? projected_box(camera, T_volume_camera.inverse(), f.march_lo, f.march_hi)
-                                   : PixelBox::whole(camera.width, camera.height);
-  if (box.area() < camera.pixel_count()) {
-    const S nan = std::numeric_limits<S>::quiet_NaN();
-    out.depth.fill(S(0));
-    out.vertices.fill(Vec3<S>::constant(nan));
-    out.normals.fill(Vec3<S>::constant(nan));
-    out.hit.fill(0);
+  f.pixels = !drawable   ? PixelBox{}
+             : f.bounded ? projected_box(camera, T_volume_camera.inverse(), f.march_lo, f.march_hi)
+                         : PixelBox::whole(camera.width, camera.height);
+  // On a GPU one pass over every pixel, those outside the box missing at
+  // once; clearing the images first and launching on the box took 0.2 ms
+  // more per frame there (H100, redkitchen_dyn_300, four objects). On the
+  // CPU the reverse: cleared images and the box's pixels only (raycast 78
+  // against 88 ms per frame on 2 cores).
+  if constexpr (B::is_device) {
+    for_each_index(volume.backend(), camera.width * camera.height, f);
+  } else {
+    if (f.pixels.area() < camera.pixel_count()) {
+      const S nan = std::numeric_limits<S>::quiet_NaN();
+      out.depth.fill(S(0));
+      out.vertices.fill(Vec3<S>::constant(nan));
+      out.normals.fill(Vec3<S>::constant(nan));
+      out.hit.fill(0);
+    }
+    for_each_pixel_in(volume.backend(), f.pixels, camera.width, f);
   }
-  for_each_pixel_in(volume.backend(), box, camera.width, f);
 }
 
 }  // namespace emfusion
