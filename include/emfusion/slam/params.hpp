@@ -80,8 +80,9 @@ struct SystemParams {
   /// The camera's solve has its own stride, pyramid and stop: it aligns a
   /// whole frame, mostly background, against the largest map, where
   /// track_camera measured the same ATE with them in a fraction of the time
-  /// (docs/decisions.md, "The camera's own solve settings"); objects keep
-  /// pixel_stride, pyramid_levels and lm as they are. The paper: 1, 1, 0.
+  /// (docs/decisions.md, "The camera's own solve settings; work objects
+  /// skip"); objects keep pixel_stride, pyramid_levels and lm as they are.
+  /// The paper: 1, 1, 0.
   int camera_pixel_stride = 0;           ///< 0: auto_pixel_stride (every 2nd pixel of a 640x480 frame)
   int camera_pyramid_levels = 3;         ///< as pyramid_levels, for the camera
   double camera_converged_step = 1e-5;   ///< lm.converged_step for the camera (0: off)

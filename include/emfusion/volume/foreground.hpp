@@ -81,7 +81,8 @@ struct MajorityVoxel {
   ForegroundView<S, const Count> counts;
   EMF_HD VoxelBox operator()(std::int64_t i) const {
     if (!(S(counts.fg[i]) > S(counts.bg[i]))) return VoxelBox{};
-    const int x = int(i % counts.nx), y = int((i / counts.nx) % counts.ny), z = int(i / (std::int64_t(counts.nx) * counts.ny));
+    const std::int64_t plane = std::int64_t(counts.nx) * counts.ny;
+    const int x = int(i % counts.nx), y = int((i / counts.nx) % counts.ny), z = int(i / plane);
     return VoxelBox{Vec3i{{x, y, z}}, Vec3i{{x + 1, y + 1, z + 1}}};
   }
 };
@@ -143,8 +144,8 @@ class ForegroundCounts {
   /// from two threads at once.
   const VoxelBox& majority_box() const {
     if (!majority_known_) {
-      majority_ = transform_reduce_index(backend_, std::int64_t(fg_.size()),
-                                         detail::MajorityVoxel<S, Count>{view()}, VoxelBox{}, detail::UniteVoxelBoxes{});
+      majority_ = transform_reduce_index(backend_, std::int64_t(fg_.size()), detail::MajorityVoxel<S, Count>{view()},
+                                         VoxelBox{}, detail::UniteVoxelBoxes{});
       majority_known_ = true;
     }
     return majority_;

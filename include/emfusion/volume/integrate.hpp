@@ -326,8 +326,8 @@ VoxelUpdate<S> prepare_voxel_update(const Image<S, B>& depth, const PinholeCamer
         box.grown(0, detail::NearestDepthPass<S>::max_radius, depth.width(), depth.height());
     for_each_pixel_in(backend, row_box, depth.width(),
                       detail::NearestDepthPass<S>{depth.view(), depth.view(), rows.view(), lateral, 1, 0});
-    for_each_pixel_in(backend, box, depth.width(),
-                      detail::NearestDepthPass<S>{depth.view(), std::as_const(rows).view(), near.view(), lateral, 0, 1});
+    const detail::NearestDepthPass<S> columns{depth.view(), std::as_const(rows).view(), near.view(), lateral, 0, 1};
+    for_each_pixel_in(backend, box, depth.width(), columns);
     near_depth = std::as_const(near).view();
   }
   return VoxelUpdate<S>{
