@@ -73,7 +73,6 @@ class Associations {
   std::vector<Image<S, B>> images_;
   Image<S, B> background_likelihood_;
   SE3<S> background_pose_ = SE3<S>::identity();
-  bool background_kept_ = false;
   // Models, poses and output views as bytes on the backend, so that a kernel
   // can read any number of them without a fixed capacity.
   typename B::template Vector<unsigned char> scratch_;
@@ -234,13 +233,12 @@ void run_e_step(const B& backend, const Image<Vec3<S>, B>& points, const M* back
   const auto* poses = reinterpret_cast<const SE3<S>*>(base + at_poses);
   auto* images = reinterpret_cast<ImageView<S>*>(base + at_views);
   if constexpr (apart) {
-    const bool reuse = background_unchanged && out.background_kept_ &&
-                       out.background_likelihood_.same_size(points.width(), points.height()) &&
-                       same_bits(out.background_pose_, T_background_camera);
-    if (!out.background_likelihood_.same_size(points.width(), points.height()))
-      out.background_likelihood_ = Image<S, B>(points.width(), points.height(), S(0), backend);
+    // The kept image is allocated by the first E-step of this size that
+    // wrote it, so its size says whether there is one to reuse.
+    const bool kept = out.background_likelihood_.same_size(points.width(), points.height());
+    const bool reuse = background_unchanged && kept && same_bits(out.background_pose_, T_background_camera);
+    if (!kept) out.background_likelihood_ = Image<S, B>(points.width(), points.height(), S(0), backend);
     out.background_pose_ = T_background_camera;
-    out.background_kept_ = true;
     for_each_index(backend, points.size(),
                    EStepBackgroundPixel<S, M, Objects>{points.view(), *background, T_background_camera, models, poses,
                                                        images, int(objects.size()),

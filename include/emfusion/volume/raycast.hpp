@@ -141,37 +141,51 @@ void check_foreground(const SparseTsdfVolume<S, B, Store>&, const ForegroundCoun
                   "foreground counts are per voxel of a dense TsdfVolume; a SparseTsdfVolume takes none (pass nullptr)");
 }
 
-/// Dense: the part of the grid where a surface may be drawn, [lo, hi] in
-/// the volume's frame: the whole grid, or with foreground counts and
-/// min_foreground >= 1/2 the voxels of their majority_box and the points
-/// whose samples reach them (half a voxel beyond their centres' box each
-/// way): only there is p_fg > 1/2. A ray's march starts where it enters
-/// that box instead of the grid's face, which finds the same crossings
-/// (one exactly on the entry plane aside) from other sample positions.
-/// Sets `bounded`; false when nothing can be drawn.
+/// Where a raycast needs to march: whether anything can be drawn at all,
+/// the box [lo, hi] (volume frame) its rays are confined to when the
+/// volume has one, and whether that box is narrower than the part
+/// ray_range already keeps (then each ray is clipped to it too).
+template <class S>
+struct MarchBox {
+  bool drawable = true;
+  bool bounded = false;   ///< [lo, hi] holds every surface that may be drawn
+  bool narrowed = false;  ///< ... and is narrower than the grid
+  Vec3<S> lo{}, hi{};
+};
+
+/// Dense: the grid, or with foreground counts and min_foreground >= 1/2
+/// the voxels of their majority_box and the points whose samples reach
+/// them (half a voxel beyond their centres' box each way): only there is
+/// p_fg > 1/2. A ray's march then starts where it enters that box instead
+/// of the grid's face, which finds the same crossings (one exactly on the
+/// entry plane aside) from other sample positions. Not drawable when no
+/// voxel has Fg > Bg.
 template <class S, Backend B, class Store>
-bool march_box(const TsdfVolume<S, B, Store>& volume, const ForegroundCounts<S, B>* foreground,
-               const RaycastParams<S>& params, bool& bounded, Vec3<S>& lo, Vec3<S>& hi) {
-  bounded = true;
-  lo = Vec3<S>::zero(), hi = volume.view().extent();
-  if (!foreground || !(params.min_foreground >= S(0.5))) return true;
+MarchBox<S> march_box(const TsdfVolume<S, B, Store>& volume, const ForegroundCounts<S, B>* foreground,
+                      const RaycastParams<S>& params) {
+  MarchBox<S> m;
+  m.bounded = true;
+  m.lo = Vec3<S>::zero(), m.hi = volume.view().extent();
+  if (!foreground || !(params.min_foreground >= S(0.5))) return m;
   const VoxelBox& box = foreground->majority_box();
-  if (box.empty()) return false;
+  if (box.empty()) {
+    m.drawable = false;
+    return m;
+  }
   const S vs = volume.voxel_size();
   for (int a = 0; a < 3; ++a) {
-    lo[a] = std::max(lo[a], (S(box.lo[a]) - S(0.5)) * vs);
-    hi[a] = std::min(hi[a], (S(box.hi[a]) + S(0.5)) * vs);
+    m.lo[a] = std::max(m.lo[a], (S(box.lo[a]) - S(0.5)) * vs);
+    m.hi[a] = std::min(m.hi[a], (S(box.hi[a]) + S(0.5)) * vs);
   }
-  return true;
+  m.narrowed = true;
+  return m;
 }
 
 /// Sparse: no box (a background map surrounds its camera; it takes no
 /// foreground counts).
 template <class S, Backend B, class Store>
-bool march_box(const SparseTsdfVolume<S, B, Store>&, const ForegroundCounts<S, B>*, const RaycastParams<S>&,
-               bool& bounded, Vec3<S>&, Vec3<S>&) {
-  bounded = false;
-  return true;
+MarchBox<S> march_box(const SparseTsdfVolume<S, B, Store>&, const ForegroundCounts<S, B>*, const RaycastParams<S>&) {
+  return MarchBox<S>{};
 }
 
 // ---- the march, written once -------------------------------------------------
@@ -188,7 +202,7 @@ struct RaycastPixel {
   ImageView<std::uint8_t> hit;
   ForegroundView<S, const float> foreground;  // empty: every crossing counts
   ImageView<const S> ray_end;                 // empty: every pixel; else rays only where > 0, ending there
-  bool bounded = false;  // march only inside [march_lo, march_hi] (march_box)
+  bool narrowed = false;  // march only inside [march_lo, march_hi] (march_box)
   Vec3<S> march_lo{}, march_hi{};
   PixelBox pixels{};  // rays only here (the march box's projection); every other pixel misses
 
@@ -212,7 +226,7 @@ struct RaycastPixel {
     const S end_depth = !ray_end.empty() && ray_end[i] < params.max_depth ? ray_end[i] : params.max_depth;
     S t = params.min_depth / ray_cam.z(), t_end = end_depth / ray_cam.z();
     if (!ray_range(volume, origin, dir, t, t_end) ||
-        (bounded && !clip_ray_to_box(origin, dir, march_lo, march_hi, t, t_end))) {
+        (narrowed && !clip_ray_to_box(origin, dir, march_lo, march_hi, t, t_end))) {
       miss(i);
       return;
     }
@@ -311,9 +325,10 @@ void raycast(const Volume& volume, const PinholeCamera<S>& camera, const SE3<S>&
   // Rays are cast only where they can meet the part of the volume where a
   // surface may be drawn (march_box: an object's is a small part of the
   // frame); every other pixel is a miss.
-  const bool drawable = detail::march_box(volume, foreground, params, f.bounded, f.march_lo, f.march_hi);
-  f.pixels = !drawable   ? PixelBox{}
-             : f.bounded ? projected_box(camera, T_volume_camera.inverse(), f.march_lo, f.march_hi)
+  const detail::MarchBox<S> m = detail::march_box(volume, foreground, params);
+  f.narrowed = m.narrowed, f.march_lo = m.lo, f.march_hi = m.hi;
+  f.pixels = !m.drawable ? PixelBox{}
+             : m.bounded ? projected_box(camera, T_volume_camera.inverse(), m.lo, m.hi)
                          : PixelBox::whole(camera.width, camera.height);
   // On a GPU one pass over every pixel, those outside the box missing at
   // once; clearing the images first and launching on the box took 0.2 ms
