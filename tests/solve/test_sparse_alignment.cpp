@@ -355,7 +355,9 @@ TEMPLATE_LIST_TEST_CASE("Sparse map: a known camera motion recovered as accurate
   CHECK(pose_error(sparse.pose() * T, truth).translation < 1e-3);
 
   // The terms sample through nearby_sampler, which remembers the blocks it
-  // found: bit for bit the view's own samples, also across block borders.
+  // found: bit for bit the view's own samples, also across block borders;
+  // so do ray casts, through its observed samples, with one block remembered
+  // on a GPU.
   {
     const auto host = sparse.template to<Host>();
     const auto view = host.view();
@@ -375,6 +377,14 @@ TEMPLATE_LIST_TEST_CASE("Sparse map: a known camera motion recovered as accurate
         return u.x() == v.x() && u.y() == v.y() && u.z() == v.z();
       };
       differing += a != b || ca != cb || r0 != r1 || w0 != w1 || !same(g0, g1) || !same(c0, c1);
+      auto one = nearby_sampler<1>(view);
+      S o0 = 0, o1 = 0, o2 = 0;
+      Vec3<S> n0 = Vec3<S>::zero(), n1 = Vec3<S>::zero(), n2 = Vec3<S>::zero();
+      const bool oa = view.sample_observed(x, o0), ob = near.sample_observed(x, o1), oc = one.sample_observed(x, o2);
+      const bool na = view.observed_gradient(x, n0), nb = near.observed_gradient(x, n1),
+                 nc = one.observed_gradient(x, n2);
+      differing += oa != ob || oa != oc || o0 != o1 || o0 != o2;
+      differing += na != nb || na != nc || !same(n0, n1) || !same(n0, n2);
       sampled += a;
       const int cx = int(std::floor(x.x() / view.voxel_size - S(0.5)));
       crossing += a && (cx & 7) == 7;

@@ -459,8 +459,13 @@ TEMPLATE_LIST_TEST_CASE("Sparse raycast of a scene 10 m from the origin", "[volu
     INFO("view " << k << ": " << c);
     CHECK(c.both > 3000);
     CHECK(c.misses_with_depth == 0);
-    CHECK(c.share_only_a() < 0.002);
-    CHECK(c.share_only_b() < 0.002);
+    // Rays that graze the sphere's silhouette hit or miss by where their
+    // samples fall, and the two marches start from different places (the
+    // grid's face, a block's face): up to 0.33 % of the hits (12 pixels)
+    // since the march steps half the SDF value (docs/decisions.md,
+    // "Raycasting"), 0.2 % before.
+    CHECK(c.share_only_a() < 0.005);
+    CHECK(c.share_only_b() < 0.005);
     // 10 m out, float positions carry rounding of about 1e-6 m.
     CHECK(c.depth_quantile(0.5) < (sizeof(S) <= 4 ? 2e-5 : 2e-6));
     CHECK(c.depth_quantile(0.99) < (sizeof(S) <= 4 ? 2e-4 : 3e-5));

@@ -1,6 +1,7 @@
-// The one atomic operation the library's parallel hash table needs, on either
-// backend: compare-and-swap of a 64-bit word. std::atomic_ref on the host
-// (OpenMP threads), atomicCAS in CUDA device code.
+// The atomic operations the library's parallel hash table needs, on either
+// backend: compare-and-swap and fetch-and-add of a 64-bit word.
+// std::atomic_ref on the host (OpenMP threads), atomicCAS and atomicAdd in
+// CUDA device code.
 #pragma once
 
 #include <atomic>
@@ -19,6 +20,17 @@ EMF_HD inline unsigned long long atomic_compare_and_swap(unsigned long long* add
 #else
   std::atomic_ref<unsigned long long>(*address).compare_exchange_strong(expected, desired);
   return expected;  // compare_exchange_strong wrote the old value here on failure
+#endif
+}
+
+/// Adds `value` to *address and returns what it held before, atomically with
+/// respect to every other atomic call on the same address. `address` must be
+/// 8-byte aligned.
+EMF_HD inline unsigned long long atomic_fetch_add(unsigned long long* address, unsigned long long value) {
+#if defined(__CUDA_ARCH__)
+  return atomicAdd(address, value);
+#else
+  return std::atomic_ref<unsigned long long>(*address).fetch_add(value);
 #endif
 }
 

@@ -119,7 +119,54 @@ struct ReductionAllocator {
   char* allocate(std::ptrdiff_t bytes) { return ReductionMemoryPool::instance().allocate(std::size_t(bytes)); }
   void deallocate(char* p, std::size_t) { ReductionMemoryPool::instance().deallocate(p); }
 };
+
+/// The current device's memory pool for stream-ordered temporaries
+/// (StreamScratch), created on first use and kept for the process: it holds
+/// on to freed memory (release threshold: never), so that allocations after
+/// the first cost no call into the driver's page mapping.
+inline cudaMemPool_t scratch_memory_pool() {
+  int device = 0;
+  check_cuda(cudaGetDevice(&device), "scratch_memory_pool: cudaGetDevice");
+  static std::mutex mutex;
+  static std::map<int, cudaMemPool_t> pools;
+  const std::lock_guard<std::mutex> lock(mutex);
+  const auto found = pools.find(device);
+  if (found != pools.end()) return found->second;
+  cudaMemPoolProps props{};
+  props.allocType = cudaMemAllocationTypePinned;
+  props.handleTypes = cudaMemHandleTypeNone;
+  props.location.type = cudaMemLocationTypeDevice;
+  props.location.id = device;
+  cudaMemPool_t pool = nullptr;
+  check_cuda(cudaMemPoolCreate(&pool, &props), "scratch_memory_pool: cudaMemPoolCreate");
+  unsigned long long keep = ~0ull;
+  check_cuda(cudaMemPoolSetAttribute(pool, cudaMemPoolAttrReleaseThreshold, &keep),
+             "scratch_memory_pool: cudaMemPoolSetAttribute");
+  pools.emplace(device, pool);
+  return pool;
+}
 }  // namespace detail
+
+/// Temporaries of the thrust algorithms one object queues on one stream
+/// (sorts, scans, compactions), allocated and freed in that stream's order
+/// (cudaMallocFromPoolAsync, cudaFreeAsync): no device-wide synchronisation
+/// as with thrust's own cudaMalloc and cudaFree, and safe however the
+/// algorithm and later work overlap. An object keeps one beside its backend
+/// and passes it to scratch_policy(); thrust holds it by reference, so it
+/// must outlive the policy.
+struct StreamScratch {
+  using value_type = char;
+  cudaStream_t stream = nullptr;
+  char* allocate(std::ptrdiff_t bytes) {
+    void* p = nullptr;
+    detail::check_cuda(cudaMallocFromPoolAsync(&p, std::size_t(bytes), detail::scratch_memory_pool(), stream),
+                       "StreamScratch: cudaMallocFromPoolAsync");
+    return static_cast<char*>(p);
+  }
+  void deallocate(char* p, std::size_t) {
+    cudaFreeAsync(p, stream);  // called from destructors: an error has nowhere to go
+  }
+};
 
 /// The CUDA backend: work is queued on `stream` (the legacy default stream
 /// unless set) without synchronising; call synchronize() before reading
@@ -142,7 +189,48 @@ struct Cuda {
   void synchronize() const { detail::check_cuda(cudaStreamSynchronize(stream), "Cuda::synchronize"); }
 };
 
+/// The policy for `backend` with temporaries from `scratch` (which must be
+/// for the backend's stream): see StreamScratch.
+inline auto scratch_policy(const Cuda& backend, StreamScratch& scratch) {
+  return thrust::cuda::par_nosync(scratch).on(backend.stream);
+}
+
 #endif
+
+/// On every other backend temporaries cost no device synchronisation:
+/// scratch_policy is the backend's policy, and its scratch holds nothing.
+struct NoScratch {};
+template <class B>
+auto scratch_policy(const B& backend, NoScratch&) {
+  return backend.policy();
+}
+
+namespace detail {
+template <class B>
+struct ScratchOf {
+  using type = NoScratch;
+};
+#if EMFUSION_HAS_CUDA
+template <>
+struct ScratchOf<Cuda> {
+  using type = StreamScratch;
+};
+#endif
+}  // namespace detail
+
+/// What an object keeps to give its thrust algorithms on backend B
+/// stream-ordered temporaries (StreamScratch on CUDA, nothing elsewhere);
+/// make one with make_scratch(backend).
+template <class B>
+using ScratchFor = typename detail::ScratchOf<B>::type;
+
+template <class B>
+ScratchFor<B> make_scratch(const B& backend) {
+  if constexpr (std::same_as<ScratchFor<B>, NoScratch>)
+    return NoScratch{};
+  else
+    return ScratchFor<B>{backend.stream};
+}
 
 /// Independent queues of work on a backend, for solves that may run at the
 /// same time from several host threads (the system's objects). On the CPU

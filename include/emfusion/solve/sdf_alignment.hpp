@@ -17,7 +17,7 @@
 #include "emfusion/core/parallel.hpp"
 #include "emfusion/core/se3.hpp"
 #include "emfusion/robust/norms.hpp"
-#include "emfusion/solve/nearby_samples.hpp"
+#include "emfusion/volume/nearby_samples.hpp"
 #include "emfusion/solve/normal_equations.hpp"
 #include "emfusion/solve/solvers.hpp"
 #include "emfusion/solve/volume_parameter.hpp"
@@ -149,7 +149,7 @@ struct SdfAlignmentTerms {
     Vec3<S> g;
     S W;
     // The view itself, or on the host for a sparse one a sampler that looks
-    // each block up once for the term's samples (solve/nearby_samples.hpp).
+    // each block up once for the term's samples (volume/nearby_samples.hpp).
     // Not on a CUDA device: there the cache's arrays live in local memory and
     // cost more than the lookups they save (H200, redkitchen_300, track_camera
     // --volume sparse: 8.2 ms per frame with the cache, 2.8 ms without;

@@ -8,13 +8,20 @@
 // (a truncation, or on the sparse volume straight to the next allocated block
 // when the ray is in an unallocated one).
 //
-// March steps follow the reference implementation: the truncation distance
-// while the SDF is truncated, then one voxel, then half a voxel once |sdf|
-// falls below 0.8 truncation. "Truncated" allows for rounding: a voxel that
-// fused free space many times holds the truncation distance to within a few
-// ulps, often just below it, and an exact comparison marched the whole free
-// space voxel by voxel (ten times the steps). A crossing is refined by regula falsi inside
-// its bracket, so the surface is found to a small fraction of a voxel.
+// Along one ray the samples of a sparse volume come from a sampler that
+// remembers the blocks it looked up (volume/nearby_samples.hpp), so that a
+// ray pays one hash lookup per block it marches through, not per sample.
+//
+// March steps: the truncation distance while the SDF is truncated (as the
+// reference implementation), then half the SDF value, at least half a voxel
+// (the reference took one voxel, then half a voxel everywhere below 0.8
+// truncation: three times the samples between the band's edge and the
+// surface; docs/decisions.md, "Raycasting"). "Truncated" allows for
+// rounding: a voxel that fused free space many times holds the truncation
+// distance to within a few ulps, often just below it, and an exact
+// comparison marched the whole free space voxel by voxel (ten times the
+// steps). A crossing is refined by regula falsi inside its bracket, so the
+// surface is found to a small fraction of a voxel.
 //
 // Object volumes pass their foreground counts: a crossing counts only where
 // the foreground probability exceeds `min_foreground` (paper sec. 3.5), so
@@ -35,6 +42,7 @@
 #include "emfusion/core/pixel_box.hpp"
 #include "emfusion/core/se3.hpp"
 #include "emfusion/volume/foreground.hpp"
+#include "emfusion/volume/nearby_samples.hpp"
 #include "emfusion/volume/sparse_tsdf_volume.hpp"
 #include "emfusion/volume/tsdf_volume.hpp"
 #include "emfusion/volume/volume_view.hpp"
@@ -232,22 +240,31 @@ struct RaycastPixel {
     }
     const S trunc = volume.truncation, vs = volume.voxel_size;
     const S truncated = trunc * S(0.999);  // above every rounding of trunc, even in half precision
+    // The ray's sampler: the view itself for a dense volume; for a sparse one
+    // a NearbySparseSampler, of one block on a CUDA device (kept in
+    // registers) and of four on the CPU (a normal's samples either side of a
+    // block border).
+#if defined(__CUDA_ARCH__)
+    auto sampler = nearby_sampler<1>(volume);
+#else
+    auto sampler = nearby_sampler<4>(volume);
+#endif
     bool have_prev = false;
     S t_prev = t, f_prev = S(0);
     // Bounded: each step advances at least half a voxel.
     const int max_steps = int((t_end - t) / (S(0.5) * vs)) + 2;
     for (int k = 0; k < max_steps && t <= t_end; ++k) {
       S f;
-      if (!volume.sample_observed(origin + t * dir, f)) {
+      if (!sampler.sample_observed(origin + t * dir, f)) {
         have_prev = false;  // unobserved space: no crossing can be trusted
         t = skip_unobserved(volume, origin, dir, t, t_end);
         continue;
       }
       if (have_prev && f_prev > S(0) && f <= S(0)) {
-        const S t_hit = refine(origin, dir, t_prev, f_prev, t, f);
+        const S t_hit = refine(sampler, origin, dir, t_prev, f_prev, t, f);
         const Vec3<S> p_hit = origin + t_hit * dir;
         if (foreground.empty() || foreground.probability(p_hit) > params.min_foreground) {
-          write_hit(i, ray_cam, t_hit, p_hit);
+          write_hit(sampler, i, ray_cam, t_hit, p_hit);
           return;
         }
       }
@@ -256,17 +273,18 @@ struct RaycastPixel {
       if (have_prev && f_prev < S(0) && f > S(0) && foreground.empty()) break;
       have_prev = true;
       t_prev = t, f_prev = f;
-      t += f >= truncated ? trunc : (f >= S(0.8) * trunc ? vs : S(0.5) * vs);
+      t += f >= truncated ? trunc : (f > vs ? S(0.5) * f : S(0.5) * vs);
     }
     miss(i);
   }
 
   /// Regula falsi on [ta, tb] with f(ta) > 0 >= f(tb).
-  EMF_HD S refine(const Vec3<S>& o, const Vec3<S>& d, S ta, S fa, S tb, S fb) const {
+  template <class Sampler>
+  EMF_HD S refine(Sampler& sampler, const Vec3<S>& o, const Vec3<S>& d, S ta, S fa, S tb, S fb) const {
     S t = ta + (tb - ta) * fa / (fa - fb);
     for (int it = 0; it < 4; ++it) {
       S f;
-      if (!volume.sample_observed(o + t * d, f)) break;
+      if (!sampler.sample_observed(o + t * d, f)) break;
       if (f > S(0)) {
         ta = t, fa = f;
       } else {
@@ -278,10 +296,11 @@ struct RaycastPixel {
     return t;
   }
 
-  EMF_HD void write_hit(int i, const Vec3<S>& ray_cam, S t, const Vec3<S>& p_volume) const {
+  template <class Sampler>
+  EMF_HD void write_hit(Sampler& sampler, int i, const Vec3<S>& ray_cam, S t, const Vec3<S>& p_volume) const {
     Vec3<S> g;
     const Vec3<S> vertex = t * ray_cam;
-    if (!volume.observed_gradient(p_volume, g) || !(squared_norm(g) > S(0))) {
+    if (!sampler.observed_gradient(p_volume, g) || !(squared_norm(g) > S(0))) {
       miss(i);
       return;
     }

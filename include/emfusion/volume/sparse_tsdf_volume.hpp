@@ -34,6 +34,7 @@
 
 #include <thrust/copy.h>
 #include <thrust/fill.h>
+#include <thrust/functional.h>
 #include <thrust/iterator/counting_iterator.h>
 #include <thrust/remove.h>
 #include <thrust/sort.h>
@@ -145,39 +146,36 @@ struct SparseTsdfView {
   /// through (a 3D digital differential analyser, one table lookup per
   /// block) and returns true with t at the distance where the ray enters the
   /// first allocated block, or beyond t_end when there is none before it.
+  /// Written with one variable per axis, no arrays indexed at run time: on a
+  /// CUDA device those would live in local memory.
   EMF_HD bool skip_unallocated(const Vec3<S>& o, const Vec3<S>& d, S& t, S t_end) const {
     const S side = S(block_side) * voxel_size;
     const Vec3<S> p = o + t * d;
-    int b[3];
-    for (int a = 0; a < 3; ++a) {
-      const S g = p[a] / side;
-      // Written so that NaN fails too; out of range counts as allocated (no skip).
-      if (!(g >= -S(detail::sparse::block_limit) && g < S(detail::sparse::block_limit))) return false;
-      b[a] = int(std::floor(g));
-    }
-    if (find_block(b[0], b[1], b[2]) >= 0) return false;
-    const S huge = std::numeric_limits<S>::max();
-    S t_next[3], t_delta[3];
-    int step[3];
-    for (int a = 0; a < 3; ++a) {
-      if (d[a] > S(0)) {
-        step[a] = 1, t_next[a] = t + (S(b[a] + 1) * side - p[a]) / d[a], t_delta[a] = side / d[a];
-      } else if (d[a] < S(0)) {
-        step[a] = -1, t_next[a] = t + (S(b[a]) * side - p[a]) / d[a], t_delta[a] = -side / d[a];
-      } else {
-        step[a] = 0, t_next[a] = huge, t_delta[a] = huge;
-      }
-    }
+    const S limit = S(detail::sparse::block_limit);
+    const S gx = p.x() / side, gy = p.y() / side, gz = p.z() / side;
+    // Written so that NaN fails too; out of range counts as allocated (no skip).
+    if (!(gx >= -limit && gx < limit && gy >= -limit && gy < limit && gz >= -limit && gz < limit)) return false;
+    int bx = int(std::floor(gx)), by = int(std::floor(gy)), bz = int(std::floor(gz));
+    if (find_block(bx, by, bz) >= 0) return false;
+    const DdaAxis ax = dda_axis(p.x(), d.x(), bx, side, t), ay = dda_axis(p.y(), d.y(), by, side, t),
+                  az = dda_axis(p.z(), d.z(), bz, side, t);
+    S next_x = ax.next, next_y = ay.next, next_z = az.next;
     // Each axis crosses at most (t_end - t) |d_a| / side + 1 block borders.
     const S span = (t_end - t) * (std::fabs(d[0]) + std::fabs(d[1]) + std::fabs(d[2])) / side;
     const int max_blocks = span < S(1 << 24) ? int(span) + 4 : (1 << 24);
     for (int k = 0; k < max_blocks; ++k) {
-      const int a = t_next[0] <= t_next[1] ? (t_next[0] <= t_next[2] ? 0 : 2) : (t_next[1] <= t_next[2] ? 1 : 2);
-      const S t_cross = t_next[a];
-      if (!(t_cross <= t_end)) break;
-      b[a] += step[a];
-      t_next[a] += t_delta[a];
-      if (find_block(b[0], b[1], b[2]) >= 0) {
+      S t_cross;
+      if (next_x <= next_y && next_x <= next_z) {
+        if (!((t_cross = next_x) <= t_end)) break;
+        bx += ax.step, next_x += ax.delta;
+      } else if (next_y <= next_z) {
+        if (!((t_cross = next_y) <= t_end)) break;
+        by += ay.step, next_y += ay.delta;
+      } else {
+        if (!((t_cross = next_z) <= t_end)) break;
+        bz += az.step, next_z += az.delta;
+      }
+      if (find_block(bx, by, bz) >= 0) {
         t = t_cross > t ? t_cross : t;
         return true;
       }
@@ -236,6 +234,19 @@ struct SparseTsdfView {
   }
 
  private:
+  /// One axis of skip_unallocated's walk: the direction it steps blocks in,
+  /// the distance t of its next block border, and the distance between its
+  /// borders (the largest S where the ray runs parallel to it).
+  struct DdaAxis {
+    int step;
+    S next, delta;
+  };
+  EMF_HD static DdaAxis dda_axis(S p, S d, int b, S side, S t) {
+    if (d > S(0)) return {1, t + (S(b + 1) * side - p) / d, side / d};
+    if (d < S(0)) return {-1, t + (S(b) * side - p) / d, -side / d};
+    const S huge = std::numeric_limits<S>::max();
+    return {0, huge, huge};
+  }
   struct Corner {
     int x, y, z;
     S fx, fy, fz;
@@ -250,26 +261,10 @@ struct SparseTsdfView {
     return true;
   }
   /// The eight voxels around corner c (index bits: 1 -> +x, 2 -> +y, 4 ->
-  /// +z), weight 0 where a block is not allocated. They span one block
-  /// unless c lies on a block's last layer; each block is looked up once.
+  /// +z), weight 0 where a block is not allocated.
   EMF_HD void gather(const Corner& c, S* v, S* w) const {
-    const int bx = c.x >> 3, by = c.y >> 3, bz = c.z >> 3;
-    const int lx = c.x & 7, ly = c.y & 7, lz = c.z & 7;
-    int found[8];  // by block offset (bits: 1 -> +x, 2 -> +y, 4 -> +z); -2 = not looked up
-    for (int o = 0; o < 8; ++o) found[o] = -2;
-    for (int k = 0; k < 8; ++k) {
-      const int x = lx + (k & 1), y = ly + ((k >> 1) & 1), z = lz + ((k >> 2) & 1);
-      const int o = (x >> 3) | ((y >> 3) << 1) | ((z >> 3) << 2);
-      if (found[o] == -2) found[o] = find_block(bx + (x >> 3), by + (y >> 3), bz + (z >> 3));
-      if (found[o] < 0) {
-        v[k] = truncation;
-        w[k] = S(0);
-        continue;
-      }
-      const std::int64_t i = std::int64_t(found[o]) * block_voxels + detail::sparse::local_index(x & 7, y & 7, z & 7);
-      v[k] = S(sdf[i]);
-      w[k] = S(weight[i]);
-    }
+    detail::sparse::gather_eight([this](int bx, int by, int bz) { return find_block(bx, by, bz); }, c.x, c.y, c.z,
+                                 sdf, weight, truncation, v, w);
   }
   EMF_HD bool load(const Corner& c, S* v, S* w) const {
     gather(c, v, w);
@@ -296,11 +291,10 @@ struct SparseVolumeParams {
   int block_capacity = 0;
 };
 
-/// What one allocation did. `touched` counts the distinct blocks the frame's
-/// truncation band touches, stored or not; of those not stored before,
-/// `inserted` were added and `refused` did not fit (capacity reached).
+/// What one allocation did with the distinct blocks it was given (a frame's
+/// truncation band) that were not stored before: `inserted` were added and
+/// `refused` did not fit (capacity reached).
 struct BlockAllocation {
-  std::int64_t touched = 0;
   std::int64_t inserted = 0;
   std::int64_t refused = 0;
 };
@@ -320,7 +314,8 @@ class SparseTsdfVolume {
   /// The largest block capacity accepted (2^26 blocks: 2^35 voxels).
   static constexpr int max_block_capacity = 1 << 26;
 
-  explicit SparseTsdfVolume(const SparseVolumeParams<S>& params, B backend = B{}) : backend_(backend) {
+  explicit SparseTsdfVolume(const SparseVolumeParams<S>& params, B backend = B{})
+      : backend_(backend), scratch_(make_scratch(backend)) {
     constexpr const char* where = "SparseTsdfVolume";
     detail::require(std::isfinite(double(params.voxel_size)) && params.voxel_size > S(0), where,
                     "voxel size must be positive and finite, got " + std::to_string(double(params.voxel_size)));
@@ -415,25 +410,46 @@ class SparseTsdfVolume {
   }
 
   /// Allocates the blocks of keys[0, count) (detail::sparse::pack_key; on the
-  /// volume's backend) that are not stored yet, in parallel: sorts and
-  /// de-duplicates the keys in place, drops those already stored, and inserts
-  /// the rest, as many as the capacity allows. The ones refused are the
-  /// largest keys (the order of the sort), so the outcome does not depend on
-  /// thread timing. allocate_blocks() calls it with a depth frame's keys.
+  /// volume's backend) that are not stored yet, in parallel: drops the keys
+  /// already stored, sorts and de-duplicates the rest in place, and inserts
+  /// them, as many as the capacity allows. The ones refused are the largest
+  /// keys (the order of the sort), so the outcome does not depend on thread
+  /// timing. allocate_blocks() gives it a depth frame's keys.
   BlockAllocation allocate_keys(typename B::template Vector<Key>& keys, std::size_t count) {
     detail::require(count <= keys.size(), "SparseTsdfVolume::allocate_keys",
                     "count " + std::to_string(count) + " exceeds the " + std::to_string(keys.size()) + " keys given");
+    if (count == 0) return {};
+    const auto end = thrust::remove_if(scratch_policy(backend_, scratch_), keys.begin(),
+                                       keys.begin() + std::ptrdiff_t(count), stored());
+    return allocate_new_keys(keys, std::size_t(end - keys.begin()));
+  }
+
+  /// The test "is this key stored?" on the volume's backend.
+  detail::sparse::IsStored stored() const {
+    return {raw(slot_keys_), raw(slot_blocks_), Key(slot_keys_.size() - 1)};
+  }
+
+  /// Writes the indices of the allocated blocks b for which pred(b) holds
+  /// (an EMF_HD functor) to the front of `out`, grown as needed, in
+  /// increasing order; returns how many.
+  template <class Pred>
+  std::int64_t select_blocks(typename B::template Vector<int>& out, Pred pred) {
+    if (allocated_ == 0) return 0;
+    if (out.size() < std::size_t(allocated_)) out.resize(std::size_t(allocated_));
+    const auto end = thrust::copy_if(scratch_policy(backend_, scratch_), thrust::counting_iterator<int>(0),
+                                     thrust::counting_iterator<int>(allocated_), out.begin(), pred);
+    return end - out.begin();
+  }
+
+  /// allocate_keys() for keys[0, count) none of which is stored (repeats
+  /// allowed): what allocate_blocks() gives, having dropped the stored ones
+  /// as it found them.
+  BlockAllocation allocate_new_keys(typename B::template Vector<Key>& keys, std::size_t count) {
     BlockAllocation result;
     if (count == 0) return result;
-    const auto policy = backend_.policy();
     const auto begin = keys.begin(), end = keys.begin() + std::ptrdiff_t(count);
-    thrust::sort(policy, begin, end);
-    const auto unique_end = thrust::unique(policy, begin, end);
-    result.touched = unique_end - begin;
-    const auto new_end =
-        thrust::remove_if(policy, begin, unique_end,
-                          detail::sparse::IsStored{raw(slot_keys_), raw(slot_blocks_), Key(slot_keys_.size() - 1)});
-    const std::int64_t fresh = new_end - begin;
+    thrust::sort(scratch_policy(backend_, scratch_), begin, end);
+    const std::int64_t fresh = thrust::unique(scratch_policy(backend_, scratch_), begin, end) - begin;
     const std::int64_t room = std::int64_t(params_.block_capacity) - allocated_;
     const int inserted = int(std::min(fresh, room));
     result.inserted = inserted;
@@ -504,6 +520,7 @@ class SparseTsdfVolume {
 
   SparseVolumeParams<S> params_;
   B backend_;
+  ScratchFor<B> scratch_;  // temporaries of the sorts and compactions
   typename B::template Vector<Key> slot_keys_;    // hash table: key per slot (empty_key = free)
   typename B::template Vector<int> slot_blocks_;  // hash table: block index per slot
   typename B::template Vector<Key> block_keys_;   // key of block b (capacity entries)
@@ -517,9 +534,10 @@ class SparseTsdfVolume {
 /// across frames instead of allocating it every call.
 template <class S, Backend B>
 struct SparseIntegrationWorkspace {
-  IntegrationWorkspace<S, B> images;                     ///< integrate()'s derived images
-  typename B::template Vector<unsigned long long> keys;  ///< block keys of the band
-  typename B::template Vector<int> blocks;               ///< blocks in view
+  IntegrationWorkspace<S, B> images;                        ///< integrate()'s derived images
+  typename B::template Vector<unsigned long long> keys;     ///< new block keys of the band
+  typename B::template Vector<unsigned long long> counter;  ///< how many (on a device)
+  typename B::template Vector<int> blocks;                  ///< blocks in view
 };
 
 /// Allocates the blocks the truncation band of `depth` touches (metres, 0 =
@@ -528,8 +546,9 @@ struct SparseIntegrationWorkspace {
 /// most half a block apart (up to 32 samples, further apart only for
 /// truncations over 7.75 blocks). With `weights`, only pixels of positive
 /// weight allocate (the rest would not change a voxel near their surface).
-/// In parallel on the volume's backend: keys per pixel, sort and unique,
-/// then insertion with compare-and-swap (SparseTsdfVolume::allocate_keys).
+/// In parallel on the volume's backend: the keys per pixel that the table
+/// does not hold yet, then sort and unique of those, then insertion with
+/// compare-and-swap (SparseTsdfVolume::allocate_new_keys).
 template <class S, Backend B, class Store>
 BlockAllocation allocate_blocks(SparseTsdfVolume<S, B, Store>& volume, const Image<S, B>& depth,
                                 const PinholeCamera<S>& camera, const SE3<S>& T_world_camera,
@@ -540,35 +559,37 @@ BlockAllocation allocate_blocks(SparseTsdfVolume<S, B, Store>& volume, const Ima
   detail::require_image(depth.view(), camera.width, camera.height, where, "depth image");
   if (weights) detail::require_image(weights->view(), depth.width(), depth.height(), where, "weight image");
   SparseIntegrationWorkspace<S, B> local;
-  auto& keys = (workspace ? *workspace : local).keys;
+  SparseIntegrationWorkspace<S, B>& ws = workspace ? *workspace : local;
   const S trunc = volume.truncation(), block = volume.block_size();
   // Samples at most half a block apart over the band of 2 truncations.
   const int samples = std::clamp(int(std::ceil(S(4) * trunc / block)) + 1, 2, detail::sparse::max_band_samples);
   const std::size_t slots = std::size_t(depth.size()) * std::size_t(samples);
-  if (keys.size() < slots) keys.resize(slots);
-  const detail::sparse::BandBlockKeys<S> f{depth.view(), weights ? weights->view() : ImageView<const S>{},
-                                           camera,       volume.pose().inverse() * T_world_camera,
-                                           trunc,        block,
-                                           samples,      thrust::raw_pointer_cast(keys.data())};
+  if (ws.keys.size() < slots) ws.keys.resize(slots);
+  if (ws.counter.size() < 1) ws.counter.resize(1);
+  detail::sparse::BandBlockKeys<S> f{depth.view(),   weights ? weights->view() : ImageView<const S>{},
+                                     camera,         volume.pose().inverse() * T_world_camera,
+                                     trunc,          block,
+                                     samples,        volume.stored(),
+                                     thrust::raw_pointer_cast(ws.keys.data()), thrust::raw_pointer_cast(ws.counter.data())};
   std::size_t count = 0;
   if constexpr (B::is_device) {
+    thrust::fill(volume.backend().policy(), ws.counter.begin(), ws.counter.end(), 0ull);
     for_each_index(volume.backend(), depth.size(), f);
-    const auto end = thrust::remove_if(volume.backend().policy(), keys.begin(), keys.begin() + std::ptrdiff_t(slots),
-                                       detail::sparse::IsEmptyKey{});
-    count = std::size_t(end - keys.begin());
+    count = std::size_t(transform_reduce_index(volume.backend(), 1, detail::sparse::ReadCounter{f.count}, 0ull,
+                                               thrust::plus<unsigned long long>()));
   } else {
     // Chunks of rows; then each chunk's keys moved to follow the previous.
     const int chunks = std::min(depth.height(), 64);
     std::vector<std::int64_t> counts(std::size_t(chunks), 0);
     for_each_index(volume.backend(), chunks, detail::sparse::BandBlockKeyRows<S>{f, chunks, counts.data()});
-    unsigned long long* data = thrust::raw_pointer_cast(keys.data());
+    unsigned long long* data = f.out;
     for (int c = 0; c < chunks; ++c) {
       const std::int64_t first = std::int64_t(c) * depth.height() / chunks * depth.width() * samples;
       std::copy(data + first, data + first + counts[std::size_t(c)], data + count);
       count += std::size_t(counts[std::size_t(c)]);
     }
   }
-  return volume.allocate_keys(keys, count);
+  return volume.allocate_new_keys(ws.keys, count);
 }
 
 /// What integrate() did to a sparse volume.
@@ -604,14 +625,9 @@ SparseIntegration integrate(SparseTsdfVolume<S, B, Store>& volume, const Image<S
     far = max_valid_depth(depth) + volume.truncation();
     if (!(far > volume.truncation())) return result;  // no measurement at all
   }
-  const int allocated = volume.allocated_blocks();
-  if (allocated == 0) return result;
-  if (ws.blocks.size() < std::size_t(allocated)) ws.blocks.resize(std::size_t(allocated));
   const auto view = volume.view();
-  const auto in_view_end = thrust::copy_if(
-      backend.policy(), thrust::counting_iterator<int>(0), thrust::counting_iterator<int>(allocated), ws.blocks.begin(),
-      detail::sparse::BlockInView<S>{view.block_keys, camera, T_camera_volume, volume.block_size(), far});
-  result.blocks_in_view = in_view_end - ws.blocks.begin();
+  result.blocks_in_view = volume.select_blocks(
+      ws.blocks, detail::sparse::BlockInView<S>{view.block_keys, camera, T_camera_volume, volume.block_size(), far});
   using Column =
       detail::sparse::IntegrateBlockColumn<S, typename SparseTsdfVolume<S, B, Store>::View, detail::VoxelUpdate<S>>;
   for_each_index(backend, result.blocks_in_view * std::int64_t(detail::sparse::block_side * detail::sparse::block_side),

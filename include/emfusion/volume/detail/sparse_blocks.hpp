@@ -96,6 +96,36 @@ EMF_HD inline bool insert_block(Key* slot_keys, int* slot_blocks, Key slot_mask,
 /// Offset of voxel (lx, ly, lz) (0..7 each) inside its block: x fastest.
 EMF_HD inline int local_index(int lx, int ly, int lz) { return (lz * block_side + ly) * block_side + lx; }
 
+/// The SDF values and weights of the eight voxels (x + dx, y + dy, z + dz),
+/// dx, dy, dz in {0, 1} (index bits: 1 -> dx, 2 -> dy, 4 -> dz), where
+/// find(bx, by, bz) gives a block's index in the storage or -1: truncation
+/// and weight 0 in a block that is not allocated. Each block the eight span
+/// is looked up once (one block seven times in eight), and nothing is
+/// indexed at run time, so on a CUDA device everything stays in registers.
+template <class S, class Store, class Find>
+EMF_HD void gather_eight(Find&& find, int x, int y, int z, const Store* sdf, const Store* weight, S truncation, S* v,
+                         S* w) {
+  const int bx = x >> block_shift, by = y >> block_shift, bz = z >> block_shift;
+  const int lx = x & (block_side - 1), ly = y & (block_side - 1), lz = z & (block_side - 1);
+  const bool ox = lx == block_side - 1, oy = ly == block_side - 1, oz = lz == block_side - 1;
+  int b[8];  // the block of voxel k
+  b[0] = find(bx, by, bz);
+  b[1] = ox ? find(bx + 1, by, bz) : b[0];
+  b[2] = oy ? find(bx, by + 1, bz) : b[0];
+  b[3] = oy ? (ox ? find(bx + 1, by + 1, bz) : b[2]) : b[1];
+  b[4] = oz ? find(bx, by, bz + 1) : b[0];
+  b[5] = oz ? (ox ? find(bx + 1, by, bz + 1) : b[4]) : b[1];
+  b[6] = oz ? (oy ? find(bx, by + 1, bz + 1) : b[4]) : b[2];
+  b[7] = oz ? (oy ? (ox ? find(bx + 1, by + 1, bz + 1) : b[6]) : b[5]) : b[3];
+  for (int k = 0; k < 8; ++k) {
+    const int vx = (lx + (k & 1)) & (block_side - 1), vy = (ly + ((k >> 1) & 1)) & (block_side - 1),
+              vz = (lz + ((k >> 2) & 1)) & (block_side - 1);
+    const std::int64_t i = std::int64_t(b[k]) * block_voxels + local_index(vx, vy, vz);
+    v[k] = b[k] < 0 ? truncation : S(sdf[i]);
+    w[k] = b[k] < 0 ? S(0) : S(weight[i]);
+  }
+}
+
 /// An axis-aligned box of block coordinates, inclusive; empty (lo > hi) by
 /// default. The volume keeps the one around its allocated blocks.
 struct BlockBox {

@@ -9,6 +9,7 @@
 #include <cstdint>
 #include <vector>
 
+#include "emfusion/core/atomic.hpp"
 #include "emfusion/core/camera.hpp"
 #include "emfusion/core/host_device.hpp"
 #include "emfusion/core/image.hpp"
@@ -29,19 +30,29 @@ EMF_HD int floor_to_int(S x) {
   return i - (S(i) > x ? 1 : 0);
 }
 
-/// The blocks the truncation band of each valid depth pixel touches: points
-/// along the pixel's ray from d - truncation to d + truncation (distances
-/// along the ray, as integration measures them), `samples` of them evenly
-/// spaced.
+/// True for keys the table already holds.
+struct IsStored {
+  const Key* slot_keys;
+  const int* slot_blocks;
+  Key slot_mask;
+  EMF_HD bool operator()(Key key) const { return find_block(slot_keys, slot_blocks, slot_mask, key) >= 0; }
+};
+
+/// The blocks the truncation band of each valid depth pixel touches that the
+/// table does not hold yet: points along the pixel's ray from d - truncation
+/// to d + truncation (distances along the ray, as integration measures
+/// them), `samples` of them evenly spaced. Once a place is mapped, a frame
+/// there finds few or none, and the sort that follows has little to do.
 ///
 /// De-duplication, exact and independent of the order threads run in: a
 /// pixel leaves out a key that its left or upper neighbour's band also
 /// touches. That neighbour writes the key itself or leaves it to its own
 /// left or upper neighbour, and so on back to some pixel that writes it, so
-/// the union of what is written is the union of every band's blocks. On a
-/// device each pixel is a thread (operator(), recomputing its neighbours'
-/// keys); on the CPU each chunk of rows is one (BandBlockKeyRows), keeping
-/// the previous row's keys.
+/// the union of what is written is the union of every band's blocks (less
+/// the stored ones, the same for every pixel). On a device each pixel is a
+/// thread (operator(), recomputing its neighbours' keys) appending to one
+/// list through an atomic counter; on the CPU each chunk of rows is one
+/// (BandBlockKeyRows), keeping the previous row's keys.
 template <class S>
 struct BandBlockKeys {
   ImageView<const S> depth;
@@ -51,7 +62,9 @@ struct BandBlockKeys {
   S truncation;
   S block_size;  // metres
   int samples;   // 2 .. max_band_samples
-  Key* out;      // `samples` slots per pixel
+  IsStored stored;
+  Key* out;                   // room for `samples` keys per pixel
+  unsigned long long* count;  // operator(): keys appended to `out` so far
 
   /// The keys of pixel (u, v)'s band, consecutive repeats dropped; returns
   /// how many (0 for a pixel without a valid measurement).
@@ -83,32 +96,27 @@ struct BandBlockKeys {
     return count;
   }
 
-  /// Pixel i's keys less those of its neighbours' bands (`left`, `up`: their
-  /// keys, nl and nu of them), written to `slots`; returns how many.
-  EMF_HD static int survivors(const Key* own, int n, const Key* left, int nl, const Key* up, int nu, Key* slots) {
-    int written = 0;
+  /// Calls emit(key) for each of a pixel's keys (`own`, n of them) that
+  /// neither neighbour's band has (`left`, `up`: their keys, nl and nu of
+  /// them) and the table does not hold.
+  template <class Emit>
+  EMF_HD void survivors(const Key* own, int n, const Key* left, int nl, const Key* up, int nu, Emit&& emit) const {
     for (int a = 0; a < n; ++a) {
       bool covered = false;
       for (int b = 0; b < nl && !covered; ++b) covered = own[a] == left[b];
       for (int b = 0; b < nu && !covered; ++b) covered = own[a] == up[b];
-      if (!covered) slots[written++] = own[a];
+      if (!covered && !stored(own[a])) emit(own[a]);
     }
-    return written;
   }
 
-  /// One pixel per thread: `samples` slots from out + i * samples, empty_key
-  /// after the keys written.
+  /// One pixel per thread: its keys appended to `out` at *count.
   EMF_HD void operator()(int i) const {
     const int u = i % depth.width, v = i / depth.width;
     Key own[max_band_samples], left[max_band_samples], up[max_band_samples];
     const int n = pixel_keys(u, v, own);
-    Key* slots = out + std::int64_t(i) * samples;
-    int written = 0;
-    if (n > 0) {
-      const int nl = pixel_keys(u - 1, v, left), nu = pixel_keys(u, v - 1, up);
-      written = survivors(own, n, left, nl, up, nu, slots);
-    }
-    for (int j = written; j < samples; ++j) slots[j] = empty_key;
+    if (n == 0) return;
+    const int nl = pixel_keys(u - 1, v, left), nu = pixel_keys(u, v - 1, up);
+    survivors(own, n, left, nl, up, nu, [this](Key key) { out[atomic_fetch_add(count, 1)] = key; });
   }
 };
 
@@ -131,6 +139,7 @@ struct BandBlockKeyRows {
       for (int u = 0; u < width; ++u) n_above[std::size_t(u)] = band.pixel_keys(u, v0 - 1, &above[std::size_t(u) * k]);
     Key* const first = band.out + std::int64_t(v0) * width * k;
     Key* next = first;
+    const auto emit = [&next](Key key) { *next++ = key; };
     for (int v = v0; v < v1; ++v) {
       for (int u = 0; u < width; ++u) {
         Key* own = &row[std::size_t(u) * k];
@@ -138,8 +147,7 @@ struct BandBlockKeyRows {
         if (n == 0) continue;
         const Key* left = u > 0 ? own - k : own;
         const int nl = u > 0 ? n_row[std::size_t(u - 1)] : 0;
-        next +=
-            BandBlockKeys<S>::survivors(own, n, left, nl, &above[std::size_t(u) * k], n_above[std::size_t(u)], next);
+        band.survivors(own, n, left, nl, &above[std::size_t(u) * k], n_above[std::size_t(u)], emit);
       }
       above.swap(row);
       n_above.swap(n_row);
@@ -148,16 +156,10 @@ struct BandBlockKeyRows {
   }
 };
 
-struct IsEmptyKey {
-  EMF_HD bool operator()(Key key) const { return key == empty_key; }
-};
-
-/// True for keys the table already holds.
-struct IsStored {
-  const Key* slot_keys;
-  const int* slot_blocks;
-  Key slot_mask;
-  EMF_HD bool operator()(Key key) const { return find_block(slot_keys, slot_blocks, slot_mask, key) >= 0; }
+/// The value of a counter on the backend, read through a reduction of one.
+struct ReadCounter {
+  const unsigned long long* counter;
+  EMF_HD unsigned long long operator()(int) const { return *counter; }
 };
 
 /// Inserts new key i as block first_block + i.

@@ -1,5 +1,5 @@
 // The arithmetic every TSDF sampler shares, whatever stores its voxels (the
-// dense TsdfView, the sparse SparseTsdfView, solve/nearby_samples.hpp's
+// dense TsdfView, the sparse SparseTsdfView, volume/nearby_samples.hpp's
 // cached sampler): trilinear interpolation of a cell's eight voxels and its
 // exact gradient, and the two finite-difference gradients built on a
 // sampler's own samples. One copy, so that the samplers agree bit for bit.

@@ -1,11 +1,13 @@
 // Several samples of one volume close together, from one thread: SDF
 // alignment samples a term's point and, with central differences, six more
-// one voxel around it. On the sparse volume each sample would look its block
-// up in the hash table again; `NearbySparseSampler` remembers the last blocks
-// it found, so that the seven samples of a term cost one or two lookups
-// instead of seven. It samples exactly as SparseTsdfView does (the same
-// arithmetic, bit for bit). `nearby_sampler(view)` gives it for a sparse view
-// and the view itself for any other (a dense view indexes directly).
+// one voxel around it; a ray cast marches along a ray in steps of half a
+// voxel to a truncation. On the sparse volume each sample would look its
+// block up in the hash table again; `NearbySparseSampler` remembers the last
+// blocks it found, so that the seven samples of a term cost one or two
+// lookups instead of seven, and a ray one per block it passes. It samples
+// exactly as SparseTsdfView does (the same arithmetic, bit for bit).
+// `nearby_sampler(view)` gives it for a sparse view and the view itself for
+// any other (a dense view indexes directly).
 #pragma once
 
 #include <cmath>
@@ -19,13 +21,15 @@
 
 namespace emfusion {
 
-/// Samples of a SparseTsdfView with a cache of the last `slots` blocks
+/// Samples of a SparseTsdfView with a cache of the last `Slots` blocks
 /// looked up (round robin). A local variable of one thread: its cache
 /// changes as it samples, so it is never shared; it refers to the view,
-/// which must outlive it.
-template <class S, class Store>
+/// which must outlive it. One slot keeps the cache in registers on a CUDA
+/// device (an array indexed at run time would live in local memory).
+template <class S, class Store, int Slots = 4>
 struct NearbySparseSampler {
-  static constexpr int slots = 4;
+  static constexpr int slots = Slots;
+  static_assert(Slots >= 1);
   const SparseTsdfView<S, Store>& view;
   detail::sparse::Key keys[slots] = {};
   int found[slots] = {};
@@ -38,12 +42,16 @@ struct NearbySparseSampler {
   EMF_HD int find_block(int bx, int by, int bz) {
     if (!detail::sparse::block_in_range(bx, by, bz)) return -1;
     const detail::sparse::Key key = detail::sparse::pack_key(bx, by, bz);
-    for (int k = 0; k < cached; ++k)
-      if (keys[k] == key) return found[k];
+    for (int k = 0; k < slots; ++k)  // a fixed trip count: unrolled, constant indices
+      if (k < cached && keys[k] == key) return found[k];
     const int b = detail::sparse::find_block(view.slot_keys, view.slot_blocks, view.slot_mask, key);
-    keys[next] = key, found[next] = b;
-    next = (next + 1) % slots;
-    if (cached < slots) ++cached;
+    if constexpr (slots == 1) {
+      keys[0] = key, found[0] = b, cached = 1;
+    } else {
+      keys[next] = key, found[next] = b;
+      next = (next + 1) % slots;
+      if (cached < slots) ++cached;
+    }
     return b;
   }
 
@@ -75,6 +83,20 @@ struct NearbySparseSampler {
     return detail::trilinear::central_gradient(*this, p, view.voxel_size, gradient);
   }
 
+  /// SparseTsdfView::sample_observed.
+  EMF_HD bool sample_observed(const Vec3<S>& p, S& sdf_out, S min_coverage = S(0.5)) {
+    Corner c;
+    if (!corner(p, c)) return false;
+    S v[8], w[8];
+    gather(c, v, w);
+    return detail::trilinear::interpolate_observed(v, w, c.fx, c.fy, c.fz, min_coverage, sdf_out);
+  }
+
+  /// SparseTsdfView::observed_gradient.
+  EMF_HD bool observed_gradient(const Vec3<S>& p, Vec3<S>& gradient) {
+    return detail::trilinear::observed_gradient(*this, p, view.voxel_size, gradient);
+  }
+
  private:
   struct Corner {
     int x, y, z;
@@ -91,39 +113,17 @@ struct NearbySparseSampler {
     return true;
   }
   /// The eight voxels around corner c (index bits: 1 -> +x, 2 -> +y, 4 ->
-  /// +z), false at the first never observed (or in a block not allocated).
-  /// Seven times in eight at 8^3 they lie in one block: one lookup and
-  /// fixed offsets; else each block they span is looked up once.
+  /// +z), each with its weight; truncation and weight 0 in a block that is
+  /// not allocated (SparseTsdfView's gather, blocks from the cache).
+  EMF_HD void gather(const Corner& c, S* v, S* w) {
+    detail::sparse::gather_eight([this](int bx, int by, int bz) { return find_block(bx, by, bz); }, c.x, c.y, c.z,
+                                 view.sdf, view.weight, view.truncation, v, w);
+  }
+  /// gather(), false if one of the eight was never observed.
   EMF_HD bool load(const Corner& c, S* v, S* w) {
-    constexpr int side = detail::sparse::block_side;
-    const int bx = c.x >> 3, by = c.y >> 3, bz = c.z >> 3;
-    const int lx = c.x & 7, ly = c.y & 7, lz = c.z & 7;
-    if (lx < side - 1 && ly < side - 1 && lz < side - 1) {
-      const int b = find_block(bx, by, bz);
-      if (b < 0) return false;
-      const std::int64_t base =
-          std::int64_t(b) * detail::sparse::block_voxels + detail::sparse::local_index(lx, ly, lz);
-      for (int k = 0; k < 8; ++k) {
-        const std::int64_t i = base + (k & 1) + ((k >> 1) & 1) * side + ((k >> 2) & 1) * side * side;
-        w[k] = S(view.weight[i]);
-        if (!(w[k] > S(0))) return false;
-        v[k] = S(view.sdf[i]);
-      }
-      return true;
-    }
-    int found_at[8];  // by block offset (bits: 1 -> +x, 2 -> +y, 4 -> +z); -2 = not looked up
-    for (int o = 0; o < 8; ++o) found_at[o] = -2;
-    for (int k = 0; k < 8; ++k) {
-      const int x = lx + (k & 1), y = ly + ((k >> 1) & 1), z = lz + ((k >> 2) & 1);
-      const int o = (x >> 3) | ((y >> 3) << 1) | ((z >> 3) << 2);
-      if (found_at[o] == -2) found_at[o] = find_block(bx + (x >> 3), by + (y >> 3), bz + (z >> 3));
-      if (found_at[o] < 0) return false;
-      const std::int64_t i =
-          std::int64_t(found_at[o]) * detail::sparse::block_voxels + detail::sparse::local_index(x & 7, y & 7, z & 7);
-      w[k] = S(view.weight[i]);
+    gather(c, v, w);
+    for (int k = 0; k < 8; ++k)
       if (!(w[k] > S(0))) return false;
-      v[k] = S(view.sdf[i]);
-    }
     return true;
   }
   EMF_HD static S interpolate(const S* v, const Corner& c) {
@@ -131,15 +131,15 @@ struct NearbySparseSampler {
   }
 };
 
-/// The sampler for several samples close together: a caching one for a
-/// sparse view, the view itself otherwise.
-template <class View>
+/// The sampler for several samples close together: a caching one (of
+/// `Slots` blocks) for a sparse view, the view itself otherwise.
+template <int Slots = 4, class View>
 EMF_HD const View& nearby_sampler(const View& view) {
   return view;
 }
-template <class S, class Store>
-EMF_HD NearbySparseSampler<S, Store> nearby_sampler(const SparseTsdfView<S, Store>& view) {
-  return NearbySparseSampler<S, Store>(view);
+template <int Slots = 4, class S, class Store>
+EMF_HD NearbySparseSampler<S, Store, Slots> nearby_sampler(const SparseTsdfView<S, Store>& view) {
+  return NearbySparseSampler<S, Store, Slots>(view);
 }
 
 }  // namespace emfusion
