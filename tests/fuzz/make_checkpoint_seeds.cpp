@@ -1,6 +1,7 @@
 // Writes the seeds of tests/fuzz/corpus/checkpoint/: small checkpoints (an
-// 8^3 background, a live and a lost object of 4^3 voxels, records with
-// trajectories) of float and double maps, and damaged copies that stop in
+// 8^3 background, or a sparse one of two blocks; a live and a lost object
+// of 4^3 voxels, records with trajectories) of float and double maps, and
+// damaged copies that stop in
 // each of the reader's checks (truncated, checksum, newer version, trailing
 // bytes). Run by hand from the repository root after changing the format:
 //
@@ -21,16 +22,24 @@ namespace {
 using namespace emfusion;
 
 template <class S>
-std::string small_checkpoint() {
+std::string small_checkpoint(bool sparse = false) {
   SystemParams<S> p;
   p.background_voxels = 8;
   p.background_voxel_size = S(0.1);
+  p.sparse_background = sparse;
+  p.background_blocks = 4;
   Map<S> map(p);
   // A few observed voxels, so that the streams are not all alike.
-  TsdfVolume<S, Host>& background = *map.background.dense();
-  std::vector<S> sdf = background.sdf_to_host(), weight = background.weight_to_host();
-  for (int i = 0; i < 64; ++i) sdf[std::size_t(i)] = S(0.01) * S(i % 7), weight[std::size_t(i)] = S(1 + i % 3);
-  background.assign_from_host(sdf, weight);
+  if (sparse) {
+    std::vector<S> sdf(2 * 512, S(1)), weight(2 * 512, S(0));
+    for (int i = 0; i < 64; ++i) sdf[std::size_t(i)] = S(0.01) * S(i % 7), weight[std::size_t(i)] = S(1 + i % 3);
+    map.background.sparse()->assign_from_host({Vec3i{{0, 0, 1}}, Vec3i{{-1, 0, 1}}}, sdf, weight);
+  } else {
+    TsdfVolume<S, Host>& background = *map.background.dense();
+    std::vector<S> sdf = background.sdf_to_host(), weight = background.weight_to_host();
+    for (int i = 0; i < 64; ++i) sdf[std::size_t(i)] = S(0.01) * S(i % 7), weight[std::size_t(i)] = S(1 + i % 3);
+    background.assign_from_host(sdf, weight);
+  }
   for (int id : {1, 2}) {
     auto o = std::make_unique<ObjectModel<S>>(id, "cup", SE3<S>::translation(vec3(S(0.1) * S(id), S(0), S(1))), 4,
                                               S(0.02), S(3));
@@ -74,6 +83,10 @@ int main(int argc, char** argv) {
   const std::string f = small_checkpoint<float>(), d = small_checkpoint<double>();
   write(dir, "float_map.emfckpt", f);
   write(dir, "double_map.emfckpt", d);
+  write(dir, "float_sparse_map.emfckpt", small_checkpoint<float>(true));
+  // float_map_v1.emfckpt beside them is the same map in format version 1
+  // (written by this program before version 2), kept so that the fuzzer
+  // starts from the older layout too.
   write(dir, "truncated.emfckpt", f.substr(0, f.size() / 2));
   std::string flipped = f;
   flipped[f.size() / 2] = char(flipped[f.size() / 2] ^ 0x40);

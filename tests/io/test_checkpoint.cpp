@@ -40,10 +40,12 @@ struct CheckpointScene {
   /// The paper's tracking, or (`tracking_options`) with everything that keeps
   /// state between frames beyond the poses: motion prediction from the last
   /// two poses, retries from the other start and a depth pyramid.
-  static SystemParams<S> params(bool tracking_options = false) {
+  static SystemParams<S> params(bool tracking_options = false, bool sparse = false) {
     SystemParams<S> p;
     p.background_voxels = 128;
     p.background_voxel_size = S(0.025);
+    p.sparse_background = sparse;
+    p.background_blocks = 1 << 12;
     p.predict_motion = tracking_options;
     p.retry_tracking = tracking_options;
     p.pyramid_levels = tracking_options ? 2 : 1;
@@ -100,8 +102,10 @@ TEMPLATE_LIST_TEST_CASE("Checkpoints: save, load, continue equals the uninterrup
   const emfusion::test::ScratchDir dir;
   const std::string path = dir.file("run.emfckpt");
   const bool tracking_options = GENERATE(false, true);
-  INFO("motion prediction, retries and a pyramid: " << (tracking_options ? "on" : "off"));
-  const SystemParams<S> params = CheckpointScene<S>::params(tracking_options);
+  const bool sparse = GENERATE(false, true);
+  INFO("motion prediction, retries and a pyramid: " << (tracking_options ? "on" : "off") << "; background "
+                                                    << (sparse ? "sparse" : "dense"));
+  const SystemParams<S> params = CheckpointScene<S>::params(tracking_options, sparse);
 
   System<S, B> straight(scene.camera, params);
   for (int i = 0; i < total; ++i) scene.template feed<B>(straight, i);
@@ -118,6 +122,7 @@ TEMPLATE_LIST_TEST_CASE("Checkpoints: save, load, continue equals the uninterrup
   System<S, B> resumed(scene.camera, params);
   restore_checkpoint(resumed, path);
   CHECK(resumed.frame_count() == first);
+  CHECK(resumed.background().is_sparse() == sparse);
   for (int i = first; i < total; ++i) scene.template feed<B>(resumed, i);
 
   // Bit for bit on the CPU; the GPU's atomics sum in any order.
@@ -147,20 +152,39 @@ TEMPLATE_LIST_TEST_CASE("Checkpoints: a loaded map meshes without the sequence",
   using B = typename TestType::Backend;
   const CheckpointScene<S> scene;
   const emfusion::test::ScratchDir dir;
-  System<S, B> system(scene.camera, scene.params());
+  const bool sparse = GENERATE(false, true);
+  INFO("background " << (sparse ? "sparse" : "dense"));
+  System<S, B> system(scene.camera, scene.params(false, sparse));
   for (int i = 0; i < 2; ++i) scene.template feed<B>(system, i);
   save_checkpoint(dir.file("a.emfckpt"), system);
   const Checkpoint<S, B> ck = load_checkpoint<S, B>(dir.file("a.emfckpt"));
-  const auto before = marching_cubes(*system.background().dense(), S(0), S(1));
-  const auto after = marching_cubes(*ck.map.background.dense(), S(0), S(1));
-  CHECK(after.vertices.size() == before.vertices.size());
+  REQUIRE(ck.map.background.is_sparse() == sparse);
+  const auto mesh = [](const BackgroundVolume<S, B>& b) {
+    return b.visit([](const auto& v) { return marching_cubes(v, S(0), S(1)); });
+  };
+  const auto before = mesh(system.background()), after = mesh(ck.map.background);
+  REQUIRE(after.vertices.size() == before.vertices.size());
   CHECK(!after.vertices.empty());
+  std::size_t differing = 0;  // the same voxels in the same order: the same mesh, bit for bit
+  for (std::size_t k = 0; k < after.vertices.size(); ++k)
+    for (int a = 0; a < 3; ++a) differing += after.vertices[k][a] != before.vertices[k][a];
+  CHECK(differing == 0);
+  if (sparse) {
+    const auto keys = [](const SparseTsdfVolume<S, B>& v) {
+      std::vector<std::uint64_t> out;
+      for (const Vec3i& c : v.blocks_to_host()) out.push_back(detail::sparse::pack_key(c[0], c[1], c[2]));
+      return out;
+    };
+    CHECK(keys(*ck.map.background.sparse()) == keys(*system.background().sparse()));
+    CHECK(ck.map.background.sparse()->capacity() == system.background().sparse()->capacity());
+  }
   REQUIRE(ck.map.objects.size() == system.objects().size());
   for (std::size_t k = 0; k < ck.map.objects.size(); ++k)
     CHECK(marching_cubes(ck.map.objects[k]->volume(), S(0), S(1)).vertices.size() ==
           marching_cubes(system.objects()[k]->volume(), S(0), S(1)).vertices.size());
-  // The saved voxels, not a dense dump: unobserved voxels compress away.
-  CHECK(emfusion::test::read_bytes(dir.file("a.emfckpt")).size() < system.memory_bytes() / 10);
+  // The saved voxels, not a dense dump: unobserved voxels compress away
+  // (a sparse background holds few of them to begin with).
+  CHECK(emfusion::test::read_bytes(dir.file("a.emfckpt")).size() < system.memory_bytes() / (sparse ? 2 : 10));
 }
 
 TEST_CASE("Checkpoints: damaged, foreign, newer and mismatched checkpoints are refused", "[io][checkpoint]") {
@@ -199,7 +223,34 @@ TEST_CASE("Checkpoints: damaged, foreign, newer and mismatched checkpoints are r
   CHECK(contains(refusal("ply\nformat ascii 1.0\n"), "not an emfusion checkpoint"));
   std::string newer = bytes;
   newer[8] = char(checkpoint_version + 1);
-  CHECK(contains(refusal(newer), "version 2 is not supported"));
+  CHECK(contains(refusal(newer), "version 3 is not supported"));
+  // Version 1 (a dense background without its kind byte) is still read,
+  // and an unknown kind is refused: payloads rebuilt with a right checksum.
+  const auto rebuilt = [&](std::uint32_t version, const std::string& payload) {
+    std::string out = bytes.substr(0, 8);
+    detail::bytes::put_u32(out, version);
+    out += bytes.substr(12, 4);
+    detail::bytes::put_u64(out, payload.size());
+    out += payload;
+    detail::bytes::put_u32(out, detail::checkpoint::crc32_of(reinterpret_cast<const unsigned char*>(payload.data()),
+                                                              payload.size()));
+    return out;
+  };
+  const std::string payload = bytes.substr(24, bytes.size() - 28);
+  std::string kind_and_dims;  // the kind byte (0, dense), then the background's dimensions
+  kind_and_dims += '\0';
+  for (int a = 0; a < 3; ++a) detail::bytes::put_i32(kind_and_dims, 128);
+  const std::size_t kind_at = payload.find(kind_and_dims);
+  REQUIRE(kind_at != std::string::npos);
+  REQUIRE(payload.find(kind_and_dims, kind_at + 1) == std::string::npos);
+  const std::string v1 = dir.file("v1.emfckpt");
+  emfusion::test::write_bytes(v1, rebuilt(1, payload.substr(0, kind_at) + payload.substr(kind_at + 1)));
+  const Checkpoint<S> old = load_checkpoint<S>(v1);
+  REQUIRE(old.map.background.dense() != nullptr);
+  CHECK(checkpoint_bytes(old.map, old.camera) == bytes);
+  std::string unknown_kind = payload;
+  unknown_kind[kind_at] = 2;
+  CHECK(contains(refusal(rebuilt(checkpoint_version, unknown_kind)), "unknown background kind 2"));
   std::string odd_scalar = bytes;
   odd_scalar[12] = 3;
   CHECK(contains(refusal(odd_scalar), "unknown scalars"));

@@ -20,6 +20,7 @@
 #include "emfusion/volume/volume_view.hpp"
 #include "support/catch.hpp"
 #include "support/configs.hpp"
+#include "support/files.hpp"
 #include "support/fusion.hpp"
 #include "support/room.hpp"
 
@@ -36,6 +37,8 @@ static_assert(!TsdfSampler<Vec3<float>, float>);
 namespace {
 
 using Key = detail::sparse::Key;
+using emfusion::test::contains;
+using emfusion::test::error_of;
 
 template <class S>
 double value_tolerance() {
@@ -682,6 +685,59 @@ TEMPLATE_LIST_TEST_CASE("Sparse volume: bad parameters throw clear errors", "[vo
   const Image<S, B> depth(camera.width, camera.height, S(1));
   const Image<S, B> weights(camera.width, camera.height + 1, S(1));
   CHECK_THROWS_WITH(integrate(sparse, depth, camera, I, &weights), EMF_CONTAINS("weight image"));
+}
+
+TEMPLATE_LIST_TEST_CASE("Sparse volume: assigned from its host copies, the same volume; bad copies refused",
+                        "[volume]", emfusion::test::HeavyConfigs) {
+  using S = typename TestType::Scalar;
+  using B = typename TestType::Backend;
+  const auto camera = test::small_camera<S>();
+  const auto poses = test::orbit_poses<S>(Vec3<S>::zero(), S(1.2), 4);
+  const auto frames = render_frames<S, B>(test::sphere_and_box<S>(), camera, poses);
+  const SE3<S> pose = SE3<S>::translation(vec3(S(0.3), S(-0.2), S(0.1)));
+  SparseTsdfVolume<S, B> original(S(0.01), S(0), pose, 1 << 12);
+  for (std::size_t k = 0; k < poses.size(); ++k) integrate(original, frames[k], camera, poses[k]);
+  const std::vector<Vec3i> blocks = original.blocks_to_host();
+  const auto sdf = original.sdf_to_host();
+  const auto weight = original.weight_to_host();
+  REQUIRE(blocks.size() > 50);
+
+  // Into a volume that held something else: exactly the original.
+  SparseTsdfVolume<S, B> copy(S(0.01), S(0), pose, 1 << 12);
+  integrate(copy, frames[3], camera, poses[0]);
+  copy.assign_from_host(blocks, sdf, weight);
+  CHECK(copy.allocated_blocks() == original.allocated_blocks());
+  CHECK(block_list(copy) == block_list(original));
+  CHECK(copy.sdf_to_host() == sdf);
+  CHECK(copy.weight_to_host() == weight);
+  for (int a = 0; a < 3; ++a) {
+    CHECK(copy.block_min()[a] == original.block_min()[a]);
+    CHECK(copy.block_max()[a] == original.block_max()[a]);
+  }
+  CHECK(stored_keys(copy) == stored_keys(original));
+  CHECK(map_is_consistent(copy.template to<Host>()));
+  // It goes on as the original does.
+  integrate(copy, frames[1], camera, poses[2]);
+  integrate(original, frames[1], camera, poses[2]);
+  CHECK(block_list(copy) == block_list(original));
+  CHECK(copy.sdf_to_host() == original.sdf_to_host());
+
+  // Refused, the volume unchanged.
+  const auto before = copy.sdf_to_host();
+  const auto refused = [&](std::vector<Vec3i> b, std::size_t voxels) {
+    const std::vector<S> v(voxels, S(0.1)), w(voxels, S(1));
+    return error_of([&] { copy.assign_from_host(b, v, w); });
+  };
+  std::vector<Vec3i> repeated = {Vec3i{{1, 2, 3}}, Vec3i{{4, 5, 6}}, Vec3i{{1, 2, 3}}};
+  CHECK(contains(refused(repeated, 3 * 512), "block 2 repeats an earlier one"));
+  std::vector<Vec3i> far = {Vec3i{{detail::sparse::block_limit, 0, 0}}};
+  CHECK(contains(refused(far, 512), "outside the addressable range"));
+  CHECK(contains(refused({Vec3i{{0, 0, 0}}}, 511), "need 512 SDF values and weights for 1 blocks"));
+  SparseTsdfVolume<S, B> tiny(S(0.01), S(0), pose, 2);
+  CHECK_THROWS_WITH(tiny.assign_from_host(repeated, std::vector<S>(3 * 512), std::vector<S>(3 * 512)),
+                    EMF_CONTAINS("3 blocks exceed the capacity of 2"));
+  CHECK(copy.sdf_to_host() == before);
+  CHECK(block_list(copy) == block_list(original));
 }
 
 TEMPLATE_LIST_TEST_CASE("Sparse volume with half storage follows the float one", "[volume]",

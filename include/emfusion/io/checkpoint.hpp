@@ -1,6 +1,7 @@
 // Checkpoints: the whole state of a System (its Map: background and object
 // volumes, foreground counts, poses, existence, class scores, lost objects,
-// trajectories, records, the frame count) and its camera in one binary file,
+// trajectories, records, the frame count; a dense or a sparse background)
+// and its camera in one binary file,
 // so that a run can stop and go on later with the same poses, and meshes of
 // a saved map can be extracted without the sequence. The format is in
 // docs/io.md, "Checkpoints": a header with a version and the scalar size, a
@@ -40,7 +41,8 @@
 namespace emfusion {
 
 /// The version save_checkpoint writes; the reader refuses newer ones.
-inline constexpr std::uint32_t checkpoint_version = 1;
+/// Version 1 held a dense background only; version 2 says which kind it is.
+inline constexpr std::uint32_t checkpoint_version = 2;
 /// The first 8 bytes of every checkpoint.
 inline constexpr char checkpoint_magic[8] = {'E', 'M', 'F', 'C', 'K', 'P', 'T', '\0'};
 
@@ -132,6 +134,33 @@ class Writer {
     pose(v.pose());
     compressed(le_bytes(v.sdf_to_host()));
     compressed(le_bytes(v.weight_to_host()));
+  }
+  template <class S, Backend B>
+  void sparse_volume(const SparseTsdfVolume<S, B>& v) {
+    scalar(v.voxel_size());
+    scalar(v.truncation());
+    pose(v.pose());
+    i32(v.capacity());
+    const std::vector<Vec3i> blocks = v.blocks_to_host();
+    u64(blocks.size());
+    std::vector<std::int32_t> coordinates(3 * blocks.size());
+    for (std::size_t b = 0; b < blocks.size(); ++b)
+      for (int a = 0; a < 3; ++a) coordinates[3 * b + std::size_t(a)] = blocks[b][a];
+    const std::vector<unsigned char> raw = le_bytes(coordinates);
+    compressed(raw);
+    compressed(le_bytes(v.sdf_to_host()));
+    compressed(le_bytes(v.weight_to_host()));
+  }
+  /// The background: its kind (0 dense, 1 sparse), then the volume.
+  template <class S, Backend B>
+  void background(const BackgroundVolume<S, B>& background) {
+    if (const auto* dense = background.dense()) {
+      u8(0);
+      volume(*dense);
+    } else {
+      u8(1);
+      sparse_volume(*background.sparse());
+    }
   }
   template <class S, Backend B>
   void object(const ObjectModel<S, B>& o) {
@@ -258,6 +287,50 @@ class Reader {
     v.assign_from_host(sdf, weight);
     return v;
   }
+  /// A sparse volume: capacity 1..2^26 blocks (SparseTsdfVolume's limit),
+  /// no more blocks than that, each once and in range.
+  template <class S, Backend B>
+  SparseTsdfVolume<S, B> sparse_volume(const char* what, const B& backend) {
+    SparseVolumeParams<S> params;
+    params.voxel_size = finite<S>(what);
+    params.truncation = finite<S>(what);
+    if (!(params.voxel_size > S(0)) || !(params.truncation > S(0)))
+      fail(std::string(what) + ": the voxel size and the truncation must be positive");
+    params.T_world_volume = pose<S>(what);
+    params.block_capacity = i32(what);
+    constexpr int max_capacity = SparseTsdfVolume<S, B>::max_block_capacity;
+    if (params.block_capacity < 1 || params.block_capacity > max_capacity)
+      fail(std::string(what) + ": block capacity " + std::to_string(params.block_capacity) + " outside 1.." +
+           std::to_string(max_capacity));
+    const std::uint64_t n = u64(what);
+    if (n > std::uint64_t(params.block_capacity))
+      fail(std::string(what) + ": " + std::to_string(n) + " blocks exceed its capacity of " +
+           std::to_string(params.block_capacity));
+    // Every stream first: a lying stream must not cost a volume's allocation.
+    const std::vector<std::int32_t> coordinates = compressed<std::int32_t>(3 * std::size_t(n), what);
+    std::vector<S> sdf = compressed<S>(std::size_t(n) * SparseTsdfVolume<S, B>::block_voxels, what);
+    std::vector<S> weight = compressed<S>(std::size_t(n) * SparseTsdfVolume<S, B>::block_voxels, what);
+    std::vector<Vec3i> blocks(static_cast<std::size_t>(n));
+    for (std::size_t b = 0; b < blocks.size(); ++b)
+      blocks[b] = Vec3i{{coordinates[3 * b], coordinates[3 * b + 1], coordinates[3 * b + 2]}};
+    SparseTsdfVolume<S, B> v(params, backend);
+    try {
+      v.assign_from_host(blocks, sdf, weight);
+    } catch (const std::invalid_argument& e) {
+      fail(std::string(what) + ": " + e.what());
+    }
+    return v;
+  }
+  /// The background of a checkpoint of `version`: dense in version 1, else
+  /// a kind (0 dense, 1 sparse) and the volume.
+  template <class S, Backend B>
+  BackgroundVolume<S, B> background(std::uint32_t version, const B& backend) {
+    constexpr const char* what = "the background volume";
+    const unsigned kind = version >= 2 ? u8("the background's kind") : 0;
+    if (kind == 0) return BackgroundVolume<S, B>(volume<S, B>(what, backend));
+    if (kind == 1) return BackgroundVolume<S, B>(sparse_volume<S, B>(what, backend));
+    fail("unknown background kind " + std::to_string(kind) + " (0 dense, 1 sparse)");
+  }
   template <class S, Backend B>
   std::unique_ptr<ObjectModel<S, B>> object(const B& backend) {
     const int id = i32("an object's id");
@@ -316,6 +389,19 @@ std::string grid_text(const TsdfVolume<S, B>& v) {
                 v.dims()[2], double(v.voxel_size()), double(v.truncation()));
   return text;
 }
+template <class S, Backend B>
+std::string grid_text(const SparseTsdfVolume<S, B>& v) {
+  char text[160];
+  std::snprintf(text, sizeof(text), "at most %d blocks of 8^3 voxels of %.9g m, truncation %.9g m", v.capacity(),
+                double(v.voxel_size()), double(v.truncation()));
+  return text;
+}
+/// The background's kind and grid, for messages.
+template <class S, Backend B>
+std::string background_text(const BackgroundVolume<S, B>& b) {
+  return std::string(b.is_sparse() ? "sparse" : "dense") + " background of " +
+         b.visit([](const auto& v) { return grid_text(v); });
+}
 }  // namespace detail::checkpoint
 
 /// The bytes of a checkpoint of `map` made with `camera` (docs/io.md,
@@ -323,8 +409,6 @@ std::string grid_text(const TsdfVolume<S, B>& v) {
 template <class S, Backend B>
 std::string checkpoint_bytes(const Map<S, B>& map, const PinholeCamera<S>& camera) {
   static_assert(sizeof(S) == 4 || sizeof(S) == 8, "checkpoints hold float or double maps");
-  detail::require(map.background.dense() != nullptr, "save_checkpoint",
-                  "checkpoints hold a dense background only so far; this map's is sparse (sparse_background)");
   detail::checkpoint::Writer w;
   w.i32(camera.width);
   w.i32(camera.height);
@@ -347,7 +431,7 @@ std::string checkpoint_bytes(const Map<S, B>& map, const PinholeCamera<S>& camer
     w.u8(r.person ? 1 : 0);
     w.trajectory(r.trajectory);
   }
-  w.volume(*map.background.dense());
+  w.background(map.background);
   w.u64(map.objects.size());
   for (const auto& o : map.objects) w.object(*o);
   w.u64(map.lost.size());
@@ -439,14 +523,14 @@ Checkpoint<S, B> parse_checkpoint(const std::string& data, const std::string& so
     rec.person = r.flag("an object record's person flag");
     rec.trajectory = r.trajectory("an object record's trajectory");
   }
-  TsdfVolume<S, B> background = r.template volume<S, B>("the background volume", backend);
+  BackgroundVolume<S, B> background = r.template background<S, B>(version, backend);
   // The smallest valid map; its background is replaced by the loaded one,
   // which may be of any size (System::restore checks it against its parameters).
   SystemParams<S> small;
   small.background_voxels = 8;
   Checkpoint<S, B> out{camera, Map<S, B>(small, backend)};
   Map<S, B>& map = out.map;
-  map.background = BackgroundVolume<S, B>(std::move(background));
+  map.background = std::move(background);
   map.frames = frames, map.started = started, map.next_id = next_id;
   map.T_world_camera = T_world_camera;
   map.camera_trajectory = std::move(camera_trajectory);
@@ -506,15 +590,18 @@ void restore_checkpoint(System<S, B, L, BN, ON, Solver>& system, const std::stri
   if (ck.camera.width != c.width || ck.camera.height != c.height || ck.camera.fx != c.fx || ck.camera.fy != c.fy ||
       ck.camera.cx != c.cx || ck.camera.cy != c.cy)
     refuse("saved with camera " + detail::checkpoint::camera_text(ck.camera) + ", the system has " + detail::checkpoint::camera_text(c));
-  if (!system.background().dense())
-    refuse("it holds a dense background and the system's is sparse (sparse_background)");
-  const TsdfVolume<S, B>& bg = *system.background().dense();
-  const TsdfVolume<S, B>& saved = *ck.map.background.dense();
-  const Vec3i& d = saved.dims();
-  if (d[0] != bg.dims()[0] || d[1] != bg.dims()[1] || d[2] != bg.dims()[2] ||
-      saved.voxel_size() != bg.voxel_size() || saved.truncation() != bg.truncation())
-    refuse("saved with a background of " + detail::checkpoint::grid_text(saved) + ", the system's parameters give " +
-           detail::checkpoint::grid_text(bg));
+  const BackgroundVolume<S, B>& bg = system.background();
+  const BackgroundVolume<S, B>& saved = ck.map.background;
+  bool same = saved.is_sparse() == bg.is_sparse() && saved.voxel_size() == bg.voxel_size() &&
+              saved.truncation() == bg.truncation();
+  if (same && !saved.is_sparse()) {
+    const Vec3i &d = saved.dense()->dims(), &e = bg.dense()->dims();
+    same = d[0] == e[0] && d[1] == e[1] && d[2] == e[2];
+  }
+  if (same && saved.is_sparse()) same = saved.sparse()->capacity() == bg.sparse()->capacity();
+  if (!same)
+    refuse("saved with a " + detail::checkpoint::background_text(saved) + ", the system's parameters give a " +
+           detail::checkpoint::background_text(bg));
   system.restore(std::move(ck.map));
 }
 

@@ -391,6 +391,52 @@ class SparseTsdfVolume {
   std::vector<Store> sdf_to_host() const { return copy_to_host(sdf_, std::size_t(allocated_) * block_voxels); }
   std::vector<Store> weight_to_host() const { return copy_to_host(weight_, std::size_t(allocated_) * block_voxels); }
 
+  /// Replaces the contents with `blocks` (block coordinates: distinct, in
+  /// the addressable range, at most the capacity), stored in that order, and
+  /// their voxels, 512 per block in the same order, x fastest within a block
+  /// (what blocks_to_host(), sdf_to_host() and weight_to_host() give): the
+  /// volume then equals the one they were read from, storage order
+  /// included. Throws std::invalid_argument, the volume unchanged, when
+  /// they do not fit.
+  void assign_from_host(const std::vector<Vec3i>& blocks, const std::vector<Store>& sdf,
+                        const std::vector<Store>& weight) {
+    constexpr const char* where = "SparseTsdfVolume::assign_from_host";
+    const std::size_t n = blocks.size();
+    detail::require(n <= std::size_t(params_.block_capacity), where,
+                    std::to_string(n) + " blocks exceed the capacity of " + std::to_string(params_.block_capacity));
+    detail::require(sdf.size() == n * block_voxels && weight.size() == n * block_voxels, where,
+                    "need " + std::to_string(n * block_voxels) + " SDF values and weights for " + std::to_string(n) +
+                        " blocks, got " + std::to_string(sdf.size()) + " and " + std::to_string(weight.size()));
+    // The table is built here and copied: the same lookups as insertion on
+    // the backend would give.
+    std::vector<Key> slot_keys(slot_keys_.size(), detail::sparse::empty_key), block_keys(n);
+    std::vector<int> slot_blocks(slot_blocks_.size(), -1);
+    detail::sparse::BlockBox box;
+    for (std::size_t b = 0; b < n; ++b) {
+      const Vec3i& c = blocks[b];
+      detail::require(detail::sparse::block_in_range(c[0], c[1], c[2]), where,
+                      "block " + std::to_string(b) + " (" + std::to_string(c[0]) + ", " + std::to_string(c[1]) + ", " +
+                          std::to_string(c[2]) + ") is outside the addressable range");
+      block_keys[b] = detail::sparse::pack_key(c[0], c[1], c[2]);
+      detail::require(detail::sparse::insert_block(slot_keys.data(), slot_blocks.data(), Key(slot_keys.size() - 1),
+                                                   block_keys[b], int(b)),
+                      where, "block " + std::to_string(b) + " repeats an earlier one");
+      for (int a = 0; a < 3; ++a) {
+        box.lo[a] = std::min(box.lo[a], c[a]);
+        box.hi[a] = std::max(box.hi[a], c[a]);
+      }
+    }
+    reset();
+    grow_storage(int(n));
+    thrust::copy(slot_keys.begin(), slot_keys.end(), slot_keys_.begin());
+    thrust::copy(slot_blocks.begin(), slot_blocks.end(), slot_blocks_.begin());
+    thrust::copy(block_keys.begin(), block_keys.end(), block_keys_.begin());
+    thrust::copy(sdf.begin(), sdf.end(), sdf_.begin());
+    thrust::copy(weight.begin(), weight.end(), weight_.begin());
+    allocated_ = int(n);
+    box_ = box;
+  }
+
   /// A copy of this volume on another backend (the same blocks at the same
   /// storage indices; the voxel storage sized to the allocated blocks).
   template <Backend B2>
