@@ -38,10 +38,15 @@ using namespace emfusion;
 
 /// The user's model: everything the system needs is the two view members it
 /// points at each model's maps and a device-callable likelihood; this one
-/// also asks for the point in the camera frame (its depth).
-template <class S>
+/// also asks for the point in the camera frame (its depth). It reads its
+/// volume through any view type (`with_volume` names the model over
+/// another), so that the system can give it the sparse background, the
+/// default; a model over TsdfView alone runs with sparse_background = false.
+template <class S, class View = TsdfView<S, const S>>
 struct DepthScaledLaplace {
-  TsdfView<S, const S> volume;                ///< set by the system per model
+  template <class OtherView>
+  using with_volume = DepthScaledLaplace<S, OtherView>;
+  View volume;                                ///< set by the system per model
   ForegroundView<S, const float> foreground;  ///< empty for the background
   S alpha = S(0.8);                           ///< weight of the inlier component
   S sigma = S(0.02);                          ///< the paper's Laplace scale, metres

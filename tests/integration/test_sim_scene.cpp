@@ -81,17 +81,11 @@ std::vector<eval::ObjectEvaluation> evaluate(const sim::DynamicScene<float>& sce
   return eval::evaluate_objects(system.camera_trajectory(), scene.camera_trajectory(), estimates, truth);
 }
 
-/// Share of points on the moving objects' surfaces along their paths (GT
-/// poses every 5th frame, once an object is 5 cm from where it rested, and
-/// 5 cm from any surface of the last frame) where the background has an
-/// observed surface: |sdf| below 1.5 voxels and weight at least 1.
-template <class B>
-double background_trace(const sim::DynamicScene<float>& scene, const System<float, B>& system) {
-  const TsdfVolume<float, B>& bg = *system.background().dense();
-  const std::vector<float> sdf = bg.sdf_to_host(), weight = bg.weight_to_host();
-  const Vec3i dims = bg.dims();
-  const TsdfView<float, const float> view{sdf.data(), weight.data(), dims[0], dims[1], dims[2], bg.voxel_size(),
-                                          bg.truncation()};
+/// background_trace() over the background volume itself, dense or sparse.
+template <class Volume>
+double background_trace_in(const sim::DynamicScene<float>& scene, const Volume& volume) {
+  const auto bg = volume.template to<Host>();
+  const auto view = bg.view();
   const int last = scene.frame_count() - 1;
   const sim::Scene<float> final_scene = scene.scene_at(last);
   // The system's world is the first camera frame.
@@ -120,6 +114,15 @@ double background_trace(const sim::DynamicScene<float>& scene, const System<floa
   }
   REQUIRE(points > 1000);
   return double(traced) / points;
+}
+
+/// Share of points on the moving objects' surfaces along their paths (GT
+/// poses every 5th frame, once an object is 5 cm from where it rested, and
+/// 5 cm from any surface of the last frame) where the background has an
+/// observed surface: |sdf| below 1.5 voxels and weight at least 1.
+template <class B>
+double background_trace(const sim::DynamicScene<float>& scene, const System<float, B>& system) {
+  return system.background().visit([&](const auto& volume) { return background_trace_in(scene, volume); });
 }
 
 }  // namespace

@@ -117,9 +117,12 @@ TEMPLATE_LIST_TEST_CASE("Stages alone: preprocessing, first mapping and object c
   CHECK(m.map.next_id == 2);
   // The object sits on the box (1.2 m ahead), the background was fused.
   CHECK(std::abs(double(m.map.objects[0]->pose().translation().z()) - 1.2) < 0.12);
-  const TsdfVolume<S, Host> background = m.map.background.dense()->template to<Host>();
   S sdf = S(1);
-  CHECK(background.view().sample(background.pose().inverse() * vec3(S(0.5), S(0.3), S(2)), sdf));
+  const bool sampled = m.map.background.visit([&](const auto& volume) {
+    const auto background = volume.template to<Host>();
+    return background.view().sample(background.pose().inverse() * vec3(S(0.5), S(0.3), S(2)), sdf);
+  });
+  CHECK(sampled);
   CHECK(std::abs(double(sdf)) < 0.02);
   // A static class makes nothing.
   OneFrameMap<S, B> table("dining_table");
@@ -489,10 +492,13 @@ TEMPLATE_LIST_TEST_CASE("Stages alone: two models of one object merge into the o
 
 /// A user's likelihood, with parameters of its own: a Gaussian on the SDF
 /// (instead of the paper's Laplace) times p_fg, plus a constant outlier
-/// level, and nothing outside the volume.
-template <class S>
+/// level, and nothing outside the volume. Written over any volume view
+/// (`with_volume`), so that the system can give it the sparse background.
+template <class S, class View = TsdfView<S, const S>>
 struct GaussianLikelihood {
-  TsdfView<S, const S> volume;
+  template <class OtherView>
+  using with_volume = GaussianLikelihood<S, OtherView>;
+  View volume;
   ForegroundView<S, const float> foreground;
   S sigma = S(0.015);
   S outlier = S(0.5);
@@ -623,8 +629,10 @@ TEMPLATE_LIST_TEST_CASE("Stages alone: tracking from a motion prediction, the re
   const auto norm_in_voxels = scaled_norm(HuberNorm<S>{S(2)}, m.map.background.voxel_size());
   for (const bool retry : {false, true}) {
     PoseTrack t;
-    track_in_volume(*m.map.background.dense(), m.frame.points, &m.frame.associations.image(0), in_volume, norm_in_voxels,
-                    align, LevenbergMarquardt{}, retry, fail_from_prediction, t, cache, m.map.background.backend());
+    m.map.background.visit([&](const auto& volume) {
+      track_in_volume(volume, m.frame.points, &m.frame.associations.image(0), in_volume, norm_in_voxels, align,
+                      LevenbergMarquardt{}, retry, fail_from_prediction, t, cache, m.map.background.backend());
+    });
     CHECK(t.attempts == (retry ? 2 : 1));
     CHECK(t.from_prediction == !retry);
     CHECK(t.outcome == (retry ? TrackingOutcome::tracked : TrackingOutcome::solve_failed));

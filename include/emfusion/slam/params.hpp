@@ -43,11 +43,11 @@ struct SystemParams {
   /// limit. Structured-light sensors stop well before 10 m.
   S max_depth = S(10);
 
-  // Background volume (slam/background.hpp): the paper's cube of
-  // background_voxels^3 with the camera at the centre of one face in the
-  // first frame; with sparse_background, sparse voxel blocks instead,
-  // unbounded, at most background_blocks of them (the memory bound).
-  bool sparse_background = false;
+  // Background volume (slam/background.hpp): sparse voxel blocks,
+  // unbounded, at most background_blocks of them (the memory bound); with
+  // sparse_background = false the paper's cube of background_voxels^3 with
+  // the camera at the centre of one face in the first frame.
+  bool sparse_background = true;
   int background_blocks = 1 << 18;  ///< 8^3-voxel blocks: 1 GiB of float voxels at most
   int background_voxels = 512;
   S background_voxel_size = S(0.01);

@@ -69,6 +69,9 @@ int run_system() {
   scene.add(sim::make_plane(sim::look_at(vec3(0.f, 0.5f, 0.f), Vec3<float>::zero(), vec3(0.f, 0.f, 1.f))));
   scene.add(sim::make_sphere(vec3(0.1f, 0.25f, 1.3f), 0.25f));
   SystemParams<float> params;
+  // BandLikelihood reads dense volumes only (no with_volume member): it runs
+  // with the paper's dense cube, not the default sparse background.
+  params.sparse_background = false;
   params.background_voxels = 96;
   params.background_voxel_size = 0.03f;
   System<float, Host, BandLikelihood, L1Norm, L1Norm> system(camera, params);
