@@ -4,12 +4,20 @@
 // EMF_HD marks functions that run both on the CPU and in CUDA kernels. It is
 // `__host__ __device__` only when nvcc compiles the unit, so the same headers
 // build with a plain C++ compiler for the CPU backend.
+//
+// EMF_NOINLINE_ON_CUDA keeps a small function that many call sites share out
+// of line where nvcc compiles the unit: a kernel that inlines it everywhere
+// can outgrow the instruction cache (the sparse ray cast did: most of its
+// stalls were instruction fetches; docs/benchmarks.md). Plain C++ builds
+// inline as they see fit.
 #pragma once
 
 #if defined(__CUDACC__)
 #define EMF_HD __host__ __device__
 #define EMFUSION_HAS_CUDA 1
+#define EMF_NOINLINE_ON_CUDA __noinline__
 #else
 #define EMF_HD
 #define EMFUSION_HAS_CUDA 0
+#define EMF_NOINLINE_ON_CUDA
 #endif

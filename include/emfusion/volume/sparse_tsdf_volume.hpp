@@ -148,7 +148,7 @@ struct SparseTsdfView {
   /// first allocated block, or beyond t_end when there is none before it.
   /// Written with one variable per axis, no arrays indexed at run time: on a
   /// CUDA device those would live in local memory.
-  EMF_HD bool skip_unallocated(const Vec3<S>& o, const Vec3<S>& d, S& t, S t_end) const {
+  EMF_HD EMF_NOINLINE_ON_CUDA bool skip_unallocated(const Vec3<S>& o, const Vec3<S>& d, S& t, S t_end) const {
     const S side = S(block_side) * voxel_size;
     const Vec3<S> p = o + t * d;
     const S limit = S(detail::sparse::block_limit);
@@ -430,9 +430,11 @@ class SparseTsdfVolume {
     grow_storage(int(n));
     thrust::copy(slot_keys.begin(), slot_keys.end(), slot_keys_.begin());
     thrust::copy(slot_blocks.begin(), slot_blocks.end(), slot_blocks_.begin());
-    thrust::copy(block_keys.begin(), block_keys.end(), block_keys_.begin());
-    thrust::copy(sdf.begin(), sdf.end(), sdf_.begin());
-    thrust::copy(weight.begin(), weight.end(), weight_.begin());
+    if (n > 0) {  // thrust forms a pointer from an empty vector's begin()
+      thrust::copy(block_keys.begin(), block_keys.end(), block_keys_.begin());
+      thrust::copy(sdf.begin(), sdf.end(), sdf_.begin());
+      thrust::copy(weight.begin(), weight.end(), weight_.begin());
+    }
     allocated_ = int(n);
     box_ = box;
   }
@@ -448,8 +450,10 @@ class SparseTsdfVolume {
     thrust::copy(block_keys_.begin(), block_keys_.end(), out.block_keys_.begin());
     out.grow_storage(allocated_);
     const auto voxels = std::ptrdiff_t(allocated_) * block_voxels;
-    thrust::copy(sdf_.begin(), sdf_.begin() + voxels, out.sdf_.begin());
-    thrust::copy(weight_.begin(), weight_.begin() + voxels, out.weight_.begin());
+    if (voxels > 0) {  // thrust forms a pointer from an empty vector's begin()
+      thrust::copy(sdf_.begin(), sdf_.begin() + voxels, out.sdf_.begin());
+      thrust::copy(weight_.begin(), weight_.begin() + voxels, out.weight_.begin());
+    }
     out.allocated_ = allocated_;
     out.box_ = box_;
     return out;
@@ -536,7 +540,7 @@ class SparseTsdfVolume {
   template <class Vec>
   static void grow(Vec& v, std::size_t size, const Store& fill) {
     Vec grown(size, fill);
-    thrust::copy(v.begin(), v.end(), grown.begin());
+    if (!v.empty()) thrust::copy(v.begin(), v.end(), grown.begin());
     v.swap(grown);
   }
 
@@ -560,7 +564,7 @@ class SparseTsdfVolume {
   std::vector<typename Vec::value_type> copy_to_host(const Vec& v, std::size_t count) const {
     backend_.synchronize();
     std::vector<typename Vec::value_type> out(count);
-    thrust::copy(v.begin(), v.begin() + std::ptrdiff_t(count), out.begin());
+    if (count > 0) thrust::copy(v.begin(), v.begin() + std::ptrdiff_t(count), out.begin());
     return out;
   }
 

@@ -64,7 +64,7 @@ EMF_HD inline Key mix(Key x) {
 }
 
 /// The block index stored under `key`, or -1.
-EMF_HD inline int find_block(const Key* slot_keys, const int* slot_blocks, Key slot_mask, Key key) {
+EMF_HD EMF_NOINLINE_ON_CUDA inline int find_block(const Key* slot_keys, const int* slot_blocks, Key slot_mask, Key key) {
   Key slot = mix(key) & slot_mask;
   for (Key probe = 0; probe <= slot_mask; ++probe) {
     const Key k = slot_keys[slot];
