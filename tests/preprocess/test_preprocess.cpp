@@ -7,6 +7,7 @@
 #include <random>
 #include <stdexcept>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "support/catch.hpp"
@@ -177,6 +178,53 @@ TEMPLATE_LIST_TEST_CASE("bilateral filter in place equals out of place", "[prepr
   bilateral_filter(depth, out);
   bilateral_filter(depth, depth);
   CHECK(depth.to_host() == out.to_host());
+}
+
+TEMPLATE_TEST_CASE("the host's row filter equals the per-pixel kernel and the exact weights", "[preprocess]", float,
+                   double) {
+  using S = TestType;
+  // Wider than two of the row filter's chunks and not a multiple of one,
+  // holes of every kind, radii up to past the image's height.
+  const int w = 2 * detail::BilateralRow<S>::chunk + 37, h = 6;
+  std::vector<double> values = with_noise(std::vector<double>(std::size_t(w * h), 1.5), 0.03, 11);
+  for (int i = 0; i < w * h; i += 13) values[std::size_t(i)] = std::vector<double>{0.0, kNaN, kInf, -2.0}[(i / 13) % 4];
+  for (int x = 0; x < w; x += 40) values[std::size_t(2 * w + x)] = 0.4;  // depth steps
+  const Image<S, Host> depth = make_depth<S, Host>(w, h, values);
+  for (const int radius : {0, 1, 3, 7}) {
+    BilateralParams<S> params;
+    params.radius = radius;
+    Image<S, Host> by_rows;
+    bilateral_filter(depth, by_rows, params);
+    Image<S, Host> by_pixels(w, h, S(0), Host{});
+    const S ks = S(-1) / (S(2) * params.sigma_space * params.sigma_space);
+    const S kd = S(-1) / (S(2) * params.sigma_depth * params.sigma_depth);
+    const detail::BilateralKernel<S> kernel{depth.view(), by_pixels.view(), ks, kd, radius};
+    for (int i = 0; i < w * h; ++i) kernel(i);
+    const auto rows = std::as_const(by_rows).view(), pixels = std::as_const(by_pixels).view();
+    const auto in = depth.view();
+    int different = 0;
+    double worst = 0;
+    for (int y = 0; y < h; ++y)
+      for (int x = 0; x < w; ++x) {
+        different += rows(x, y) != pixels(x, y);
+        // The exact filter, in double with std::exp.
+        const double c = double(in(x, y));
+        double sum = 0, sum_w = 0;
+        if (!is_valid_depth(c)) continue;
+        for (int v = std::max(0, y - radius); v <= std::min(h - 1, y + radius); ++v)
+          for (int u = std::max(0, x - radius); u <= std::min(w - 1, x + radius); ++u) {
+            const double d = double(in(u, v));
+            if (!is_valid_depth(d)) continue;
+            const double wt = std::exp(double((u - x) * (u - x) + (v - y) * (v - y)) * double(ks) +
+                                       (d - c) * (d - c) * double(kd));
+            sum += wt * d, sum_w += wt;
+          }
+        worst = std::max(worst, std::fabs(double(rows(x, y)) - sum / sum_w));
+      }
+    INFO("radius " << radius << ": " << different << " pixels differ, worst error " << worst << " m");
+    CHECK(different == 0);  // the same weights summed in the same order
+    CHECK(worst <= (sizeof(S) == 4 ? 5e-6 : 1e-12));  // metres, at 1.5 m: float rounding of the sums
+  }
 }
 
 TEMPLATE_LIST_TEST_CASE("back_project then project gives the pixel back", "[preprocess]", emfusion::test::AllConfigs) {
