@@ -5,17 +5,19 @@
 // block up in the hash table again; `NearbySparseSampler` remembers the last
 // blocks it found, so that the seven samples of a term cost one or two
 // lookups instead of seven, and a ray one per block it passes. It samples
-// exactly as SparseTsdfView does (the same arithmetic, bit for bit).
+// exactly as SparseTsdfView does: both through detail/sparse_samples.hpp.
 // `nearby_sampler(view)` gives it for a sparse view and the view itself for
 // any other (a dense view indexes directly).
 #pragma once
 
 #include <cmath>
 #include <cstdint>
+#include <type_traits>
 
 #include "emfusion/core/host_device.hpp"
 #include "emfusion/core/math.hpp"
 #include "emfusion/volume/detail/sparse_blocks.hpp"
+#include "emfusion/volume/detail/sparse_samples.hpp"
 #include "emfusion/volume/detail/trilinear.hpp"
 #include "emfusion/volume/sparse_tsdf_volume.hpp"
 
@@ -57,25 +59,12 @@ struct NearbySparseSampler {
 
   /// SparseTsdfView::sample.
   EMF_HD bool sample(const Vec3<S>& p, S& sdf_out, S* weight_out = nullptr) {
-    Corner c;
-    if (!corner(p, c)) return false;
-    S v[8], w[8];
-    if (!load(c, v, w)) return false;
-    sdf_out = interpolate(v, c);
-    if (weight_out) *weight_out = interpolate(w, c);
-    return true;
+    return samples().sample(p, sdf_out, weight_out);
   }
 
   /// SparseTsdfView::sample_with_gradient.
   EMF_HD bool sample_with_gradient(const Vec3<S>& p, S& sdf_out, Vec3<S>& gradient, S* weight_out = nullptr) {
-    Corner c;
-    if (!corner(p, c)) return false;
-    S v[8], w[8];
-    if (!load(c, v, w)) return false;
-    sdf_out = interpolate(v, c);
-    if (weight_out) *weight_out = interpolate(w, c);
-    gradient = detail::trilinear::gradient(v, c.fx, c.fy, c.fz, view.voxel_size);
-    return true;
+    return samples().sample(p, sdf_out, weight_out, &gradient);
   }
 
   /// SparseTsdfView::central_gradient.
@@ -85,11 +74,7 @@ struct NearbySparseSampler {
 
   /// SparseTsdfView::sample_observed.
   EMF_HD bool sample_observed(const Vec3<S>& p, S& sdf_out, S min_coverage = S(0.5)) {
-    Corner c;
-    if (!corner(p, c)) return false;
-    S v[8], w[8];
-    gather(c, v, w);
-    return detail::trilinear::interpolate_observed(v, w, c.fx, c.fy, c.fz, min_coverage, sdf_out);
+    return samples().sample_observed(p, sdf_out, min_coverage);
   }
 
   /// SparseTsdfView::observed_gradient.
@@ -98,36 +83,11 @@ struct NearbySparseSampler {
   }
 
  private:
-  struct Corner {
-    int x, y, z;
-    S fx, fy, fz;
-  };
-  EMF_HD bool corner(const Vec3<S>& p, Corner& c) const {
-    const S gx = p.x() / view.voxel_size - S(0.5), gy = p.y() / view.voxel_size - S(0.5),
-            gz = p.z() / view.voxel_size - S(0.5);
-    // Written so that NaN coordinates fail the test.
-    const S l = S(detail::sparse::voxel_limit - 2);
-    if (!(gx >= -l && gy >= -l && gz >= -l && gx < l && gy < l && gz < l)) return false;
-    c.x = int(std::floor(gx)), c.y = int(std::floor(gy)), c.z = int(std::floor(gz));
-    c.fx = gx - S(c.x), c.fy = gy - S(c.y), c.fz = gz - S(c.z);
-    return true;
-  }
-  /// The eight voxels around corner c (index bits: 1 -> +x, 2 -> +y, 4 ->
-  /// +z), each with its weight; truncation and weight 0 in a block that is
-  /// not allocated (SparseTsdfView's gather, blocks from the cache).
-  EMF_HD void gather(const Corner& c, S* v, S* w) {
-    detail::sparse::gather_eight([this](int bx, int by, int bz) { return find_block(bx, by, bz); }, c.x, c.y, c.z,
-                                 view.sdf, view.weight, view.truncation, v, w);
-  }
-  /// gather(), false if one of the eight was never observed.
-  EMF_HD bool load(const Corner& c, S* v, S* w) {
-    gather(c, v, w);
-    for (int k = 0; k < 8; ++k)
-      if (!(w[k] > S(0))) return false;
-    return true;
-  }
-  EMF_HD static S interpolate(const S* v, const Corner& c) {
-    return detail::trilinear::interpolate(v, c.fx, c.fy, c.fz);
+  /// The samples, their blocks from the cache (detail/sparse_samples.hpp).
+  EMF_HD auto samples() {
+    return detail::sparse::samples_of<S, std::add_const_t<Store>>(
+        [this](int bx, int by, int bz) { return find_block(bx, by, bz); }, view.sdf, view.weight, view.voxel_size,
+        view.truncation);
   }
 };
 

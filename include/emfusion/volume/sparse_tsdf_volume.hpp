@@ -52,6 +52,7 @@
 #include "emfusion/volume/detail/sparse_blocks.hpp"
 #include "emfusion/volume/detail/trilinear.hpp"
 #include "emfusion/volume/detail/sparse_kernels.hpp"
+#include "emfusion/volume/detail/sparse_samples.hpp"
 #include "emfusion/volume/integrate.hpp"
 
 namespace emfusion {
@@ -63,6 +64,7 @@ template <class S, class Store = S>
 struct SparseTsdfView {
   static constexpr int block_side = detail::sparse::block_side;
   static constexpr int block_voxels = detail::sparse::block_voxels;
+  using const_store = std::add_const_t<Store>;
 
   Store* sdf = nullptr;     ///< block b's voxels at [b * 512, (b + 1) * 512), x fastest
   Store* weight = nullptr;  ///< same layout
@@ -189,24 +191,14 @@ struct SparseTsdfView {
   /// (an unallocated block counts as never observed). `weight_out`, if
   /// given, receives the interpolated weight.
   EMF_HD bool sample(const Vec3<S>& p, S& sdf_out, S* weight_out = nullptr) const {
-    Corner c;
-    if (!corner(p, c)) return false;
-    S v[8], w[8];
-    if (!load(c, v, w)) return false;
-    sdf_out = interpolate(v, c);
-    if (weight_out) *weight_out = interpolate(w, c);
-    return true;
+    return samples().sample(p, sdf_out, weight_out);
   }
 
   /// Trilinear SDF over the observed voxels of the eight around p, their
   /// interpolation weights renormalised: true where those voxels carry at
   /// least `min_coverage` of the weight (TsdfView::sample_observed).
   EMF_HD bool sample_observed(const Vec3<S>& p, S& sdf_out, S min_coverage = S(0.5)) const {
-    Corner c;
-    if (!corner(p, c)) return false;
-    S v[8], w[8];
-    gather(c, v, w);
-    return detail::trilinear::interpolate_observed(v, w, c.fx, c.fy, c.fz, min_coverage, sdf_out);
+    return samples().sample_observed(p, sdf_out, min_coverage);
   }
 
   /// Central differences one voxel apart of `sample_observed`, one-sided
@@ -217,14 +209,7 @@ struct SparseTsdfView {
 
   /// Trilinear SDF and its exact gradient (of the trilinear interpolant) at p.
   EMF_HD bool sample_with_gradient(const Vec3<S>& p, S& sdf_out, Vec3<S>& gradient, S* weight_out = nullptr) const {
-    Corner c;
-    if (!corner(p, c)) return false;
-    S v[8], w[8];
-    if (!load(c, v, w)) return false;
-    sdf_out = interpolate(v, c);
-    if (weight_out) *weight_out = interpolate(w, c);
-    gradient = detail::trilinear::gradient(v, c.fx, c.fy, c.fz, voxel_size);
-    return true;
+    return samples().sample(p, sdf_out, weight_out, &gradient);
   }
 
   /// SDF gradient by central differences of trilinear samples one voxel
@@ -247,33 +232,11 @@ struct SparseTsdfView {
     const S huge = std::numeric_limits<S>::max();
     return {0, huge, huge};
   }
-  struct Corner {
-    int x, y, z;
-    S fx, fy, fz;
-  };
-  EMF_HD bool corner(const Vec3<S>& p, Corner& c) const {
-    const S gx = p.x() / voxel_size - S(0.5), gy = p.y() / voxel_size - S(0.5), gz = p.z() / voxel_size - S(0.5);
-    // Written so that NaN coordinates fail the test.
-    const S l = S(detail::sparse::voxel_limit - 2);
-    if (!(gx >= -l && gy >= -l && gz >= -l && gx < l && gy < l && gz < l)) return false;
-    c.x = int(std::floor(gx)), c.y = int(std::floor(gy)), c.z = int(std::floor(gz));
-    c.fx = gx - S(c.x), c.fy = gy - S(c.y), c.fz = gz - S(c.z);
-    return true;
-  }
-  /// The eight voxels around corner c (index bits: 1 -> +x, 2 -> +y, 4 ->
-  /// +z), weight 0 where a block is not allocated.
-  EMF_HD void gather(const Corner& c, S* v, S* w) const {
-    detail::sparse::gather_eight([this](int bx, int by, int bz) { return find_block(bx, by, bz); }, c.x, c.y, c.z,
-                                 sdf, weight, truncation, v, w);
-  }
-  EMF_HD bool load(const Corner& c, S* v, S* w) const {
-    gather(c, v, w);
-    for (int k = 0; k < 8; ++k)
-      if (!(w[k] > S(0))) return false;
-    return true;
-  }
-  EMF_HD static S interpolate(const S* v, const Corner& c) {
-    return detail::trilinear::interpolate(v, c.fx, c.fy, c.fz);
+  /// The samples, each looking its blocks up in the table
+  /// (detail/sparse_samples.hpp).
+  EMF_HD auto samples() const {
+    return detail::sparse::samples_of<S, const_store>([this](int bx, int by, int bz) { return find_block(bx, by, bz); },
+                                                      sdf, weight, voxel_size, truncation);
   }
 };
 
@@ -311,6 +274,7 @@ class SparseTsdfVolume {
   using Key = detail::sparse::Key;
   static constexpr int block_side = detail::sparse::block_side;
   static constexpr int block_voxels = detail::sparse::block_voxels;
+  using const_store = std::add_const_t<Store>;
   /// The largest block capacity accepted (2^26 blocks: 2^35 voxels).
   static constexpr int max_block_capacity = 1 << 26;
 
