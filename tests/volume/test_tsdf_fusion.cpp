@@ -130,6 +130,45 @@ TEMPLATE_LIST_TEST_CASE("Raycasting the fused volume reproduces rendered depth",
   CHECK(false_hits < truth.size() / 200);
 }
 
+TEMPLATE_LIST_TEST_CASE("A depth-only raycast gives the full cast's depths and leaves vertices and normals empty",
+                        "[volume]", emfusion::test::AllConfigs) {
+  using S = typename TestType::Scalar;
+  using B = typename TestType::Backend;
+  const auto camera = test::small_camera<S>();
+  TsdfVolume<S, B> volume(test::cube_around<S>(Vec3<S>::zero(), 64, S(0.01)));
+  test::fuse_views(volume, box_scene<S>(), camera, test::orbit_poses<S>(Vec3<S>::zero(), S(1.2), 24));
+  const SE3<S> pose = sim::look_at<S>(vec3(S(0.7), S(-0.6), S(0.5)), Vec3<S>::zero(), vec3(S(0), S(0), S(1)));
+  RaycastResult<S, B> full, depth_only;
+  raycast(volume, camera, pose, full);
+  RaycastParams<S> params;
+  params.surface = false;
+  raycast(volume, camera, pose, depth_only, params);
+  CHECK(depth_only.vertices.empty());
+  CHECK(depth_only.normals.empty());
+  const auto d_full = full.depth.to_host(), d_only = depth_only.depth.to_host();
+  const auto h_full = full.hit.to_host(), h_only = depth_only.hit.to_host();
+  // The same march: every hit of the full cast at the same depth; a pixel
+  // the full cast missed may hit only where its crossing had no gradient.
+  std::size_t hits = 0, extra = 0, different = 0;
+  for (std::size_t i = 0; i < d_full.size(); ++i) {
+    if (h_full[i]) {
+      ++hits;
+      different += !h_only[i] || d_only[i] != d_full[i];
+    } else {
+      extra += h_only[i];
+      if (!h_only[i]) different += d_only[i] != S(0);
+    }
+  }
+  INFO(hits << " hits, " << extra << " more without the gradient, " << different << " pixels differ");
+  CHECK(hits > d_full.size() / 10);
+  CHECK(different == 0);
+  CHECK(extra <= hits / 100);
+  // Casting with surfaces again into the same result allocates them again.
+  raycast(volume, camera, pose, depth_only);
+  CHECK(depth_only.normals.same_size(camera.width, camera.height));
+  CHECK(depth_only.hit.to_host() == h_full);
+}
+
 TEMPLATE_LIST_TEST_CASE("Integration weights: per-pixel weights and the W_max cap", "[volume]",
                         emfusion::test::AllConfigs) {
   using S = typename TestType::Scalar;

@@ -94,7 +94,9 @@ class ObjectModel {
   const TsdfVolume<S, B>& volume() const { return volume_; }
   ForegroundCounts<S, B>& foreground() { return foreground_; }
   const ForegroundCounts<S, B>& foreground() const { return foreground_; }
-  /// The last raycast of this object (the system's segmentation uses it).
+  /// The last raycast of this object: depth and hit, which the system's
+  /// segmentation uses (vertices and normals are left empty: render_models
+  /// casts with RaycastParams::surface off; raycast the volume for them).
   RaycastResult<S, B>& rendering() { return rendering_; }
   const RaycastResult<S, B>& rendering() const { return rendering_; }
 

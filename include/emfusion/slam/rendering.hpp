@@ -89,6 +89,7 @@ void render_models(Map<S, B>& map, Frame<S, B>& frame, const PinholeCamera<S>& c
   const B& backend = frame.points.backend();
   RaycastParams<S> rp;
   rp.min_foreground = params.min_foreground;
+  rp.surface = false;  // the segmentation needs depth alone
   const int w = camera.width, h = camera.height;
   if (!frame.segmentation.same_size(w, h)) frame.segmentation = Image<int, B>(w, h, -1, backend);
   if (!ws.object_depth.same_size(w, h)) ws.object_depth = Image<S, B>(w, h, S(0), backend);

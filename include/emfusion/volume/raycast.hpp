@@ -54,6 +54,11 @@ struct RaycastParams {
   S min_depth = S(0.1);  ///< metres along the optical axis
   S max_depth = S(20);
   S min_foreground = S(0.5);  ///< with foreground counts: draw only where p_fg exceeds this
+  /// Vertices and normals too. false: depth and hit only, vertices and
+  /// normals left empty, and a crossing is a hit without the SDF gradient
+  /// there (sampling it is a quarter of a ray's samples; a segmentation
+  /// needs depth alone).
+  bool surface = true;
 };
 
 /// Images a raycast writes; reuse one across frames to avoid allocations.
@@ -64,13 +69,20 @@ struct RaycastResult {
   Image<Vec3<S>, B> normals;     ///< camera frame, unit, facing the camera; NaN where no hit
   Image<std::uint8_t, B> hit;    ///< 1 where the ray hit a surface
 
-  /// (Re)allocates the images for a width x height camera on `backend`.
-  void resize(int width, int height, const B& backend) {
-    if (depth.same_size(width, height)) return;
-    depth = Image<S, B>(width, height, S(0), backend);
-    vertices = Image<Vec3<S>, B>(width, height, Vec3<S>{}, backend);
-    normals = Image<Vec3<S>, B>(width, height, Vec3<S>{}, backend);
-    hit = Image<std::uint8_t, B>(width, height, 0, backend);
+  /// (Re)allocates the images for a width x height camera on `backend`;
+  /// without `surface`, vertices and normals are released (left empty).
+  void resize(int width, int height, const B& backend, bool surface = true) {
+    if (!depth.same_size(width, height)) {
+      depth = Image<S, B>(width, height, S(0), backend);
+      hit = Image<std::uint8_t, B>(width, height, 0, backend);
+    }
+    if (!surface) {
+      vertices = Image<Vec3<S>, B>();
+      normals = Image<Vec3<S>, B>();
+    } else if (!vertices.same_size(width, height)) {
+      vertices = Image<Vec3<S>, B>(width, height, Vec3<S>{}, backend);
+      normals = Image<Vec3<S>, B>(width, height, Vec3<S>{}, backend);
+    }
   }
 };
 
@@ -224,11 +236,12 @@ struct RaycastPixel {
   PixelBox pixels{};  // rays only here (the march box's projection); every other pixel misses
 
   EMF_HD void miss(int i) const {
-    const S nan = std::numeric_limits<S>::quiet_NaN();
     depth[i] = S(0);
+    hit[i] = 0;
+    if (!params.surface) return;
+    const S nan = std::numeric_limits<S>::quiet_NaN();
     vertices[i] = Vec3<S>::constant(nan);
     normals[i] = Vec3<S>::constant(nan);
-    hit[i] = 0;
   }
 
   EMF_HD void operator()(int i) const {
@@ -306,6 +319,11 @@ struct RaycastPixel {
   EMF_HD void write_hit(Sampler& sampler, int i, const Vec3<S>& ray_cam, S t, const Vec3<S>& p_volume) const {
     Vec3<S> g;
     const Vec3<S> vertex = t * ray_cam;
+    if (!params.surface) {
+      depth[i] = vertex.z();
+      hit[i] = 1;
+      return;
+    }
     if (!sampler.observed_gradient(p_volume, g) || !(squared_norm(g) > S(0))) {
       miss(i);
       return;
@@ -339,7 +357,7 @@ void raycast(const Volume& volume, const PinholeCamera<S>& camera, const SE3<S>&
                   "need 0 <= min_depth < max_depth");
   if (foreground) detail::check_foreground(volume, *foreground);
   if (ray_end) detail::require_image(ray_end->view(), camera.width, camera.height, "raycast", "ray_end image");
-  out.resize(camera.width, camera.height, volume.backend());
+  out.resize(camera.width, camera.height, volume.backend(), params.surface);
   const SE3<S> T_volume_camera = volume.pose().inverse() * T_world_camera;
   detail::RaycastPixel<S, decltype(volume.view())> f{
       volume.view(),      camera,         T_volume_camera,
@@ -366,9 +384,11 @@ void raycast(const Volume& volume, const PinholeCamera<S>& camera, const SE3<S>&
     if (f.pixels.area() < camera.pixel_count()) {
       const S nan = std::numeric_limits<S>::quiet_NaN();
       out.depth.fill(S(0));
-      out.vertices.fill(Vec3<S>::constant(nan));
-      out.normals.fill(Vec3<S>::constant(nan));
       out.hit.fill(0);
+      if (params.surface) {
+        out.vertices.fill(Vec3<S>::constant(nan));
+        out.normals.fill(Vec3<S>::constant(nan));
+      }
     }
     for_each_pixel_in(volume.backend(), f.pixels, camera.width, f);
   }
