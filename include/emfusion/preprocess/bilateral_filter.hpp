@@ -103,11 +103,11 @@ struct BilateralRow {
 
   /// All ones where d is a measurement (finite, positive: is_valid_depth),
   /// zero elsewhere, from integer comparisons of its bits.
-  EMF_HD static int valid_depth_mask(float d) {
+  EMF_HD static unsigned valid_depth_mask(float d) {
     const int b = float_bits(d);
-    return -int((b > 0) & (b < 0x7f800000));
+    return 0u - unsigned((b > 0) & (b < 0x7f800000));
   }
-  EMF_HD static float masked(float x, int mask) { return float_from_bits(float_bits(x) & mask); }
+  EMF_HD static float masked(float x, unsigned mask) { return float_from_bits(int(unsigned(float_bits(x)) & mask)); }
   EMF_HD static bool valid_depth_mask(double d) { return is_valid_depth(d); }
   EMF_HD static double masked(double x, bool keep) { return keep ? x : 0.0; }
 
