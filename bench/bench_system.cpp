@@ -25,9 +25,9 @@
 // OMP_WAIT_POLICY=passive (docs/benchmarks.md).
 #include <algorithm>
 #include <cmath>
-#include <limits>
 #include <cstdio>
 #include <filesystem>
+#include <limits>
 #include <map>
 #include <optional>
 #include <stdexcept>

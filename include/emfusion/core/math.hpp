@@ -192,10 +192,10 @@ EMF_HD S clamp(S v, S lo, S hi) {
   return v < lo ? lo : (v > hi ? hi : v);
 }
 
-/// The bits of a float as an int, and back. The builtin std::bit_cast
-/// wraps takes its argument by value: std::bit_cast's reference parameter
-/// put it in memory in the sanitizer build (-O1), where the bilateral
-/// filter then ran at a third of its former speed.
+/// The bits of a float as an int, and back, through the builtin that
+/// std::bit_cast wraps: the builtin takes its argument by value, while
+/// std::bit_cast's reference parameter put it in memory in the sanitizer
+/// build (-O1), where the bilateral filter then ran at a third of its speed.
 EMF_HD inline int float_bits(float x) {
 #if defined(__CUDA_ARCH__)
   return __float_as_int(x);
