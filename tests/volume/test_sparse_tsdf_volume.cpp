@@ -1,7 +1,8 @@
 // The sparse voxel-block TSDF volume: agreement with the dense volume on the
 // same frames (values, gradients, voxel by voxel), memory against the dense
-// cube, a scene far from the origin, a full table, hash collisions, parallel
-// allocation against a serial reference, unallocated space, bad parameters.
+// cube, a scene far from the origin, lookups through the index grid against
+// the hash table, a full table, hash collisions, parallel allocation against
+// a serial reference, unallocated space, bad parameters.
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
@@ -10,11 +11,14 @@
 #include <random>
 #include <set>
 #include <stdexcept>
+#include <string>
 #include <type_traits>
 #include <vector>
 
 #include "emfusion/core/half.hpp"
 #include "emfusion/volume/integrate.hpp"
+#include "emfusion/volume/nearby_samples.hpp"
+#include "emfusion/volume/raycast.hpp"
 #include "emfusion/volume/sparse_tsdf_volume.hpp"
 #include "emfusion/volume/tsdf_volume.hpp"
 #include "emfusion/volume/volume_view.hpp"
@@ -82,7 +86,7 @@ std::set<Key> serial_band_keys(const SparseTsdfVolume<S, B, Store>& volume, cons
                                            volume.truncation(),
                                            block,
                                            samples,
-                                           {nullptr, nullptr, 0},
+                                           {nullptr, nullptr, 0, {}},
                                            nullptr,
                                            nullptr};
   std::set<Key> keys;
@@ -110,14 +114,23 @@ std::set<Key> stored_keys(const SparseTsdfVolume<S, B, Store>& volume) {
   return keys;
 }
 
-/// Every stored block is found under its own key at its own index: the
-/// table and the block list agree.
+/// Every stored block is found under its own key at its own index, in the
+/// table and in the index grid (when the volume keeps one), and the grid
+/// holds nothing else: the table, the grid and the block list agree.
 template <class S, class Store>
 bool map_is_consistent(const SparseTsdfVolume<S, Host, Store>& host) {
   const auto view = host.view();
   for (int b = 0; b < view.blocks; ++b) {
     const Vec3i c = view.block_coordinates(b);
     if (view.find_block(c[0], c[1], c[2]) != b) return false;
+    const Key key = detail::sparse::pack_key(c[0], c[1], c[2]);
+    if (detail::sparse::find_block(view.slot_keys, view.slot_blocks, view.slot_mask, key) != b) return false;
+  }
+  if (view.grid.cells) {
+    const std::int64_t cells = std::int64_t(view.grid.size[0]) * view.grid.size[1] * view.grid.size[2];
+    if (cells != host.index_grid_cells()) return false;
+    if (std::count_if(view.grid.cells, view.grid.cells + cells, [](int b) { return b >= 0; }) != view.blocks)
+      return false;
   }
   return true;
 }
@@ -467,6 +480,107 @@ TEMPLATE_LIST_TEST_CASE("Sparse volume: a scene 10 m from the origin integrates 
   CHECK_FALSE(sv.sample(vec3(S(0), S(0), S(0)), unused));  // nothing was seen at the origin
 }
 
+TEMPLATE_LIST_TEST_CASE("Sparse volume: lookups through the index grid find what the hash table finds", "[volume]",
+                        emfusion::test::HeavyConfigs) {
+  using S = typename TestType::Scalar;
+  using B = typename TestType::Backend;
+  // The same frames fused into three volumes: with the index grid (the
+  // default), without (every lookup hashes), and with a budget that the
+  // grid outgrows when the camera moves 3 m on, so that it is dropped. A
+  // second scene there makes the blocks' box grow: the grid is built anew.
+  const auto camera = test::small_camera<S>();
+  const Vec3<S> far = vec3(S(3), S(0.5), S(-2));
+  sim::Scene<S> scene = test::sphere_and_box<S>();
+  scene.add(sim::make_sphere(far, S(0.3)));
+  std::vector<SE3<S>> poses = test::orbit_poses<S>(Vec3<S>::zero(), S(1.2), 4);
+  for (const SE3<S>& pose : test::orbit_poses<S>(far, S(1.0), 4)) poses.push_back(pose);
+  const auto frames = render_frames<S, B>(scene, camera, poses);
+
+  SparseVolumeParams<S> params{S(0.01), S(0), SE3<S>::identity(), 8192};
+  SparseTsdfVolume<S, B> gridded(params);
+  params.grid_cells_per_block = 0;
+  SparseTsdfVolume<S, B> hashed(params);
+  // 16384 cells: enough for the first scene's box (1859 cells with room to
+  // grow on the CPU in float), not for both scenes'.
+  params.grid_cells_per_block = 2;
+  SparseTsdfVolume<S, B> outgrown(params);
+  std::int64_t first_cells = 0;
+  for (std::size_t k = 0; k < poses.size(); ++k) {
+    for (auto* v : {&gridded, &hashed, &outgrown}) integrate(*v, frames[k], camera, poses[k]);
+    if (k == 3) {
+      first_cells = gridded.index_grid_cells();
+      CHECK(outgrown.has_index_grid());
+    }
+  }
+  CHECK(gridded.has_index_grid());
+  CHECK_FALSE(hashed.has_index_grid());
+  CHECK_FALSE(outgrown.has_index_grid());
+  CHECK(outgrown.index_grid_cells() == 0);
+  INFO("grid cells after the first scene " << first_cells << ", after both " << gridded.index_grid_cells());
+  CHECK(first_cells > 0);
+  CHECK(gridded.index_grid_cells() > first_cells);  // built anew over the grown box
+  CHECK(gridded.memory_bytes() == hashed.memory_bytes() + std::size_t(gridded.index_grid_cells()) * sizeof(int));
+  CHECK(gridded.memory_bound_bytes() == hashed.memory_bound_bytes() + 8192u * 16u * sizeof(int));
+
+  // The same blocks in the same order, the same voxels, bit for bit.
+  const auto g = gridded.template to<Host>(), h = hashed.template to<Host>(), o = outgrown.template to<Host>();
+  REQUIRE(h.allocated_blocks() > 0);
+  CHECK(block_list(g) == block_list(h));
+  CHECK(block_list(o) == block_list(h));
+  CHECK(g.sdf_to_host() == h.sdf_to_host());
+  CHECK(g.weight_to_host() == h.weight_to_host());
+  CHECK(map_is_consistent(g));
+  CHECK(map_is_consistent(h));
+  CHECK(g.has_index_grid());  // the host copy builds its own
+
+  // with_nearby_sampler hands the grid's sampler where there is a grid,
+  // else the caching one (or with no cache asked for, the view).
+  const auto gv = g.view(), hv = h.view();
+  const auto kind = [](const auto& sampler) {
+    using T = std::decay_t<decltype(sampler)>;
+    if constexpr (std::is_same_v<T, GriddedSparseSampler<S, const S>>) return 1;
+    if constexpr (std::is_same_v<T, NearbySparseSampler<S, const S, 4>>) return 2;
+    if constexpr (std::is_same_v<T, SparseTsdfView<S, const S>>) return 3;
+    return 0;
+  };
+  CHECK(with_nearby_sampler(gv, kind) == 1);
+  CHECK(with_nearby_sampler(hv, kind) == 2);
+  CHECK(with_nearby_sampler<0>(hv, kind) == 3);
+
+  // Samples, through the view and through the nearby sampler, bit for bit,
+  // at random points around both scenes and beyond the blocks' box.
+  auto gn = nearby_sampler(gv);
+  auto hn = nearby_sampler(hv);
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<double> c(-0.6, 0.6);
+  std::size_t sampled = 0, differing = 0;
+  for (int tried = 0; tried < 20000; ++tried) {
+    const Vec3<S> centre = tried % 3 == 0 ? Vec3<S>::zero() : (tried % 3 == 1 ? far : vec3(S(-9), S(4), S(1)));
+    const Vec3<S> p = centre + vec3(S(c(rng)), S(c(rng)), S(c(rng)));
+    S a = 0, b = 0, an = 0, bn = 0, wa = 0, wb = 0;
+    Vec3<S> ga{}, gb{};
+    const bool sa = gv.sample_with_gradient(p, a, ga, &wa), sb = hv.sample_with_gradient(p, b, gb, &wb);
+    const bool na = gn.sample_observed(p, an), nb = hn.sample_observed(p, bn);
+    S ag = 0;
+    if (GriddedSparseSampler<S, const S>(gv).sample_observed(p, ag) != nb || ag != bn) ++differing;
+    if (sa) ++sampled;
+    if (sa != sb || na != nb || a != b || wa != wb || !(squared_norm(ga - gb) == S(0)) || an != bn) ++differing;
+  }
+  INFO("sampled " << sampled << ", differing " << differing);
+  CHECK(sampled > 1000);
+  CHECK(differing == 0);
+
+  // Ray casts skip unallocated blocks through either: the same depths.
+  for (std::size_t k : {std::size_t(1), std::size_t(6)}) {
+    RaycastResult<S, Host> rg, rh;
+    raycast(g, camera, poses[k], rg);
+    raycast(h, camera, poses[k], rh);
+    CHECK(rg.depth.to_host() == rh.depth.to_host());
+    const std::vector<std::uint8_t> hits = rg.hit.to_host();
+    CHECK(std::count(hits.begin(), hits.end(), 1) > camera.width * camera.height / 10);
+  }
+}
+
 TEMPLATE_LIST_TEST_CASE("Sparse volume: a full table refuses blocks, counts them and keeps the stored ones", "[volume]",
                         emfusion::test::HeavyConfigs) {
   using S = typename TestType::Scalar;
@@ -676,6 +790,12 @@ TEMPLATE_LIST_TEST_CASE("Sparse volume: bad parameters throw clear errors", "[vo
   CHECK_THROWS_WITH(V(S(0.01), S(0), I, V::max_block_capacity + 1), EMF_CONTAINS("block capacity"));
   CHECK_THROWS_AS(V(S(0.01), S(0), I, 0), std::invalid_argument);
   CHECK(double(V(S(0.01), S(0), I, 1).truncation()) == test::Approx(0.1));
+  for (const int cells : {-1, V::max_grid_cells_per_block + 1}) {
+    SparseVolumeParams<S> p{S(0.01), S(0), I, 10};
+    p.grid_cells_per_block = cells;
+    CHECK_THROWS_WITH(V(p), EMF_CONTAINS("index grid cells per block must be between 0 and 1024, got " +
+                                         std::to_string(cells)));
+  }
 
   V sparse(S(0.01), S(0), I, 10);
   const auto camera = test::small_camera<S>();

@@ -148,19 +148,22 @@ struct SdfAlignmentTerms {
     const Vec3<S> x = T_volume_camera * p;
     Vec3<S> g;
     S W;
-    // The view itself, or on the host for a sparse one a sampler that looks
+    // The view itself, or for a sparse one with an index grid a sampler that
+    // reads the grid alone, or without one on the host a sampler that looks
     // each block up once for the term's samples (volume/nearby_samples.hpp).
-    // Not on a CUDA device: there the cache's arrays live in local memory and
-    // cost more than the lookups they save (H200, redkitchen_300, track_camera
-    // --volume sparse: 8.2 ms per frame with the cache, 2.8 ms without;
-    // docs/volumes.md).
+    // Not that one on a CUDA device: there the cache's arrays live in local
+    // memory and cost more than the lookups they save (H200, redkitchen_300,
+    // track_camera --volume sparse: 8.2 ms per frame with the cache, 2.8 ms
+    // without; docs/volumes.md).
 #if defined(__CUDA_ARCH__)
-    const auto& sampler = volume;
+    constexpr int cached_blocks = 0;
 #else
-    auto&& sampler = nearby_sampler(volume);
+    constexpr int cached_blocks = 4;
 #endif
-    if (!sampler.sample_with_gradient(x, r, g, &W)) return false;
-    if (central_gradient && !sampler.central_gradient(x, g)) return false;
+    const bool sampled = with_nearby_sampler<cached_blocks>(volume, [&](auto& sampler) {
+      return sampler.sample_with_gradient(x, r, g, &W) && (!central_gradient || sampler.central_gradient(x, g));
+    });
+    if (!sampled) return false;
     if (confidence_scale > S(0)) q *= (W * confidence_scale < S(1) ? W * confidence_scale : S(1));
     if (noise_reference_sigma > S(0)) {
       const S ratio = noise_reference_sigma / kinect_depth_sigma(p.z());

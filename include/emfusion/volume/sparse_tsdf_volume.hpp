@@ -19,9 +19,12 @@
 // construction; voxel storage grows with the allocated blocks (doubling, at
 // most to the capacity). When the capacity is reached, allocation refuses the
 // new blocks that do not fit and counts them; stored blocks are never moved
-// or dropped. The volume keeps the box of its allocated blocks, and the view
-// skips unallocated blocks along a ray (skip_unallocated), for ray casting
-// (raycast.hpp). docs/volumes.md has the details.
+// or dropped. The volume keeps the box of its allocated blocks and, while it
+// fits a budget of cells per block of capacity, a dense grid of block indices
+// over that box, so that finding a block is one read instead of a walk of
+// the table's probe sequence. The view skips unallocated blocks along a ray
+// (skip_unallocated), for ray casting (raycast.hpp). docs/volumes.md has the
+// details.
 #pragma once
 
 #include <algorithm>
@@ -79,17 +82,22 @@ struct SparseTsdfView {
   /// (block_lo > block_hi when none is): where rays may find anything.
   Vec3i block_lo{{0, 0, 0}};
   Vec3i block_hi{{-1, -1, -1}};
+  /// The dense index over a box holding every allocated block, when the
+  /// volume keeps one (grid.cells not null): lookups read it, not the table.
+  detail::sparse::BlockGrid grid{};
 
   /// A read-only view of the same volume (only for views of mutable voxels).
   template <class U = Store>
   requires(!std::is_const_v<U>) EMF_HD operator SparseTsdfView<S, const U>() const {
     return {sdf,    weight,     slot_keys,  slot_blocks, slot_mask, block_keys,
-            blocks, voxel_size, truncation, block_lo,    block_hi};
+            blocks, voxel_size, truncation, block_lo,    block_hi,  grid};
   }
 
   /// Index of block (bx, by, bz) in the voxel storage, or -1 if it is not
-  /// allocated (or outside the addressable range).
+  /// allocated (or outside the addressable range): one read of the index
+  /// grid when there is one, else a walk of the table's probe sequence.
   EMF_HD int find_block(int bx, int by, int bz) const {
+    if (grid.cells) return grid.find(bx, by, bz);
     if (!detail::sparse::block_in_range(bx, by, bz)) return -1;
     return detail::sparse::find_block(slot_keys, slot_blocks, slot_mask, detail::sparse::pack_key(bx, by, bz));
   }
@@ -145,45 +153,12 @@ struct SparseTsdfView {
   /// Empty-space skipping along the ray o + t d (volume frame, d of any
   /// length but not zero). If the block at o + t d is allocated, returns
   /// false and leaves t alone. Otherwise walks the blocks the ray passes
-  /// through (a 3D digital differential analyser, one table lookup per
-  /// block) and returns true with t at the distance where the ray enters the
-  /// first allocated block, or beyond t_end when there is none before it.
-  /// Written with one variable per axis, no arrays indexed at run time: on a
-  /// CUDA device those would live in local memory.
+  /// through (detail::sparse::walk_to_allocated: one lookup per block) and
+  /// returns true with t at the distance where the ray enters the first
+  /// allocated block, or beyond t_end when there is none before it.
   EMF_HD EMF_NOINLINE_ON_CUDA bool skip_unallocated(const Vec3<S>& o, const Vec3<S>& d, S& t, S t_end) const {
-    const S side = S(block_side) * voxel_size;
-    const Vec3<S> p = o + t * d;
-    const S limit = S(detail::sparse::block_limit);
-    const S gx = p.x() / side, gy = p.y() / side, gz = p.z() / side;
-    // Written so that NaN fails too; out of range counts as allocated (no skip).
-    if (!(gx >= -limit && gx < limit && gy >= -limit && gy < limit && gz >= -limit && gz < limit)) return false;
-    int bx = int(std::floor(gx)), by = int(std::floor(gy)), bz = int(std::floor(gz));
-    if (find_block(bx, by, bz) >= 0) return false;
-    const DdaAxis ax = dda_axis(p.x(), d.x(), bx, side, t), ay = dda_axis(p.y(), d.y(), by, side, t),
-                  az = dda_axis(p.z(), d.z(), bz, side, t);
-    S next_x = ax.next, next_y = ay.next, next_z = az.next;
-    // Each axis crosses at most (t_end - t) |d_a| / side + 1 block borders.
-    const S span = (t_end - t) * (std::fabs(d[0]) + std::fabs(d[1]) + std::fabs(d[2])) / side;
-    const int max_blocks = span < S(1 << 24) ? int(span) + 4 : (1 << 24);
-    for (int k = 0; k < max_blocks; ++k) {
-      S t_cross;
-      if (next_x <= next_y && next_x <= next_z) {
-        if (!((t_cross = next_x) <= t_end)) break;
-        bx += ax.step, next_x += ax.delta;
-      } else if (next_y <= next_z) {
-        if (!((t_cross = next_y) <= t_end)) break;
-        by += ay.step, next_y += ay.delta;
-      } else {
-        if (!((t_cross = next_z) <= t_end)) break;
-        bz += az.step, next_z += az.delta;
-      }
-      if (find_block(bx, by, bz) >= 0) {
-        t = t_cross > t ? t_cross : t;
-        return true;
-      }
-    }
-    t = t_end + side;
-    return true;
+    return detail::sparse::walk_to_allocated([this](int bx, int by, int bz) { return find_block(bx, by, bz); },
+                                             S(block_side) * voxel_size, o, d, t, t_end);
   }
 
   /// Trilinear SDF at volume-frame point p. Returns false (and leaves the
@@ -219,19 +194,6 @@ struct SparseTsdfView {
   }
 
  private:
-  /// One axis of skip_unallocated's walk: the direction it steps blocks in,
-  /// the distance t of its next block border, and the distance between its
-  /// borders (the largest S where the ray runs parallel to it).
-  struct DdaAxis {
-    int step;
-    S next, delta;
-  };
-  EMF_HD static DdaAxis dda_axis(S p, S d, int b, S side, S t) {
-    if (d > S(0)) return {1, t + (S(b + 1) * side - p) / d, side / d};
-    if (d < S(0)) return {-1, t + (S(b) * side - p) / d, -side / d};
-    const S huge = std::numeric_limits<S>::max();
-    return {0, huge, huge};
-  }
   /// The samples, each looking its blocks up in the table
   /// (detail/sparse_samples.hpp).
   EMF_HD auto samples() const {
@@ -252,6 +214,14 @@ struct SparseVolumeParams {
   /// Most blocks of 8^3 voxels the volume holds: its memory bound
   /// (SparseTsdfVolume::memory_bound_bytes).
   int block_capacity = 0;
+  /// Most cells of the index grid (4 bytes each) per block of capacity. The
+  /// volume keeps a dense grid of block indices over the box of its
+  /// allocated blocks (with room to grow) while the box fits in
+  /// block_capacity * grid_cells_per_block cells, so that a lookup is one
+  /// read; beyond that, and with 0, every lookup walks the hash table.
+  /// 16 adds at most 64 bytes a block to the bound (a block of float voxels
+  /// is 4096).
+  int grid_cells_per_block = 16;
 };
 
 /// What one allocation did with the distinct blocks it was given (a frame's
@@ -277,6 +247,8 @@ class SparseTsdfVolume {
   using const_store = std::add_const_t<Store>;
   /// The largest block capacity accepted (2^26 blocks: 2^35 voxels).
   static constexpr int max_block_capacity = 1 << 26;
+  /// The largest SparseVolumeParams::grid_cells_per_block accepted.
+  static constexpr int max_grid_cells_per_block = 1024;
 
   explicit SparseTsdfVolume(const SparseVolumeParams<S>& params, B backend = B{})
       : backend_(backend), scratch_(make_scratch(backend)) {
@@ -289,6 +261,9 @@ class SparseTsdfVolume {
     detail::require(params.block_capacity >= 1 && params.block_capacity <= max_block_capacity, where,
                     "block capacity must be between 1 and " + std::to_string(max_block_capacity) + " blocks, got " +
                         std::to_string(params.block_capacity));
+    detail::require(params.grid_cells_per_block >= 0 && params.grid_cells_per_block <= max_grid_cells_per_block, where,
+                    "index grid cells per block must be between 0 and " + std::to_string(max_grid_cells_per_block) +
+                        ", got " + std::to_string(params.grid_cells_per_block));
     params_ = params;
     if (params_.truncation == S(0)) params_.truncation = S(10) * params.voxel_size;
     std::size_t slots = 2;
@@ -311,6 +286,7 @@ class SparseTsdfVolume {
     thrust::fill(backend_.policy(), weight_.begin(), weight_.end(), Store(0));
     allocated_ = 0;
     box_ = detail::sparse::BlockBox{};
+    grid_on_ = false;
   }
 
   const SparseVolumeParams<S>& params() const { return params_; }
@@ -331,12 +307,21 @@ class SparseTsdfVolume {
   Vec3i block_max() const { return Vec3i{{box_.hi[0], box_.hi[1], box_.hi[2]}}; }
   /// Voxels in allocated blocks.
   std::int64_t voxel_count() const { return std::int64_t(allocated_) * block_voxels; }
-  /// Bytes reserved now: the hash table, the block keys and the voxel
-  /// storage grown so far.
-  std::size_t memory_bytes() const { return table_bytes() + 2 * sdf_.size() * sizeof(Store); }
-  /// Bytes the volume reserves when every block of its capacity is in use.
+  /// True while the volume keeps its index grid (lookups read it instead of
+  /// the table; SparseVolumeParams::grid_cells_per_block).
+  bool has_index_grid() const { return grid_on_; }
+  /// Cells of the index grid now (0 without one).
+  std::int64_t index_grid_cells() const { return grid_on_ ? std::int64_t(grid_cells_.size()) : 0; }
+  /// Bytes reserved now: the hash table, the block keys, the index grid and
+  /// the voxel storage grown so far.
+  std::size_t memory_bytes() const {
+    return table_bytes() + grid_cells_.size() * sizeof(int) + 2 * sdf_.size() * sizeof(Store);
+  }
+  /// Bytes the volume reserves when every block of its capacity is in use
+  /// (and the index grid at its largest).
   std::size_t memory_bound_bytes() const {
-    return table_bytes() + 2 * std::size_t(params_.block_capacity) * block_voxels * sizeof(Store);
+    return table_bytes() + std::size_t(grid_limit()) * sizeof(int) +
+           2 * std::size_t(params_.block_capacity) * block_voxels * sizeof(Store);
   }
 
   View view() { return make_view<View>(raw(sdf_), raw(weight_)); }
@@ -401,6 +386,7 @@ class SparseTsdfVolume {
     }
     allocated_ = int(n);
     box_ = box;
+    update_grid(0, allocated_);
   }
 
   /// A copy of this volume on another backend (the same blocks at the same
@@ -420,6 +406,7 @@ class SparseTsdfVolume {
     }
     out.allocated_ = allocated_;
     out.box_ = box_;
+    out.update_grid(0, allocated_);
     return out;
   }
 
@@ -440,7 +427,7 @@ class SparseTsdfVolume {
 
   /// The test "is this key stored?" on the volume's backend.
   detail::sparse::IsStored stored() const {
-    return {raw(slot_keys_), raw(slot_blocks_), Key(slot_keys_.size() - 1)};
+    return {raw(slot_keys_), raw(slot_blocks_), Key(slot_keys_.size() - 1), grid_view()};
   }
 
   /// Writes the indices of the allocated blocks b for which pred(b) holds
@@ -478,6 +465,7 @@ class SparseTsdfVolume {
     box_ = box_.merged(transform_reduce_index(backend_, inserted,
                                               detail::sparse::BoxOfKey{thrust::raw_pointer_cast(keys.data())},
                                               detail::sparse::BlockBox{}, detail::sparse::MergeBoxes{}));
+    update_grid(allocated_ - inserted, inserted);
     return result;
   }
 
@@ -487,6 +475,54 @@ class SparseTsdfVolume {
 
   std::size_t table_bytes() const {
     return slot_keys_.size() * (sizeof(Key) + sizeof(int)) + block_keys_.size() * sizeof(Key);
+  }
+  std::int64_t grid_limit() const { return std::int64_t(params_.block_capacity) * params_.grid_cells_per_block; }
+  static std::int64_t cells_of(const detail::sparse::BlockBox& b) {
+    std::int64_t n = 1;
+    for (int a = 0; a < 3; ++a) n *= b.hi[a] < b.lo[a] ? 0 : std::int64_t(b.hi[a]) - b.lo[a] + 1;
+    return n;
+  }
+  /// The index grid as kernels read it: no cells when there is none.
+  detail::sparse::BlockGrid grid_view() const {
+    detail::sparse::BlockGrid g;
+    if (!grid_on_) return g;
+    g.cells = raw(grid_cells_);
+    for (int a = 0; a < 3; ++a) g.lo[a] = grid_box_.lo[a], g.size[a] = grid_box_.hi[a] - grid_box_.lo[a] + 1;
+    return g;
+  }
+  /// Keeps the index grid in step with the blocks after blocks first ..
+  /// first + count - 1 were stored: writes them into it while its box holds
+  /// every block; otherwise builds it anew over the blocks' box with a
+  /// quarter of its extent to spare on each side (less if that exceeds the
+  /// budget), or goes without when even the bare box exceeds it.
+  void update_grid(int first, int count) {
+    if (grid_limit() == 0 || allocated_ == 0) return;
+    if (grid_on_ && grid_box_.contains(box_)) {
+      scatter_to_grid(first, count);
+      return;
+    }
+    detail::sparse::BlockBox padded = box_;
+    for (int a = 0; a < 3; ++a) {
+      const int pad = std::max(2, (box_.hi[a] - box_.lo[a] + 1) / 4);
+      padded.lo[a] = std::max(box_.lo[a] - pad, -detail::sparse::block_limit);
+      padded.hi[a] = std::min(box_.hi[a] + pad, detail::sparse::block_limit - 1);
+    }
+    const detail::sparse::BlockBox grid_box = cells_of(padded) <= grid_limit() ? padded : box_;
+    backend_.synchronize();  // kernels in flight may read the old grid
+    if (cells_of(grid_box) > grid_limit()) {
+      grid_on_ = false;
+      typename B::template Vector<int>().swap(grid_cells_);
+      return;
+    }
+    typename B::template Vector<int>(std::size_t(cells_of(grid_box))).swap(grid_cells_);
+    thrust::fill(backend_.policy(), grid_cells_.begin(), grid_cells_.end(), -1);
+    grid_box_ = grid_box;
+    grid_on_ = true;
+    scatter_to_grid(0, allocated_);
+  }
+  void scatter_to_grid(int first, int count) {
+    if (count > 0)
+      for_each_index(backend_, count, detail::sparse::ScatterToGrid{raw(block_keys_), raw(grid_cells_), grid_view(), first});
   }
   /// Makes the voxel storage hold at least `blocks` blocks: doubling, capped
   /// at the capacity, reallocated to the exact size (a vector's own growth
@@ -517,6 +553,7 @@ class SparseTsdfVolume {
     v.block_keys = raw(block_keys_), v.blocks = allocated_;
     v.voxel_size = params_.voxel_size, v.truncation = params_.truncation;
     v.block_lo = block_min(), v.block_hi = block_max();
+    v.grid = grid_view();
     return v;
   }
   // No pointer into an empty vector: thrust forms it by dereferencing null.
@@ -541,7 +578,10 @@ class SparseTsdfVolume {
   typename B::template Vector<Store> sdf_;        // voxel storage, 512 per block
   typename B::template Vector<Store> weight_;
   int allocated_ = 0;
-  detail::sparse::BlockBox box_;  // around the allocated blocks
+  detail::sparse::BlockBox box_;                // around the allocated blocks
+  typename B::template Vector<int> grid_cells_;  // index grid: block per cell of grid_box_, -1 for none
+  detail::sparse::BlockBox grid_box_;           // holds box_ while grid_on_
+  bool grid_on_ = false;
 };
 
 /// Scratch memory of sparse allocation and integration; pass one to reuse it

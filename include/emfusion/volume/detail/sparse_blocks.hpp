@@ -93,6 +93,43 @@ EMF_HD inline bool insert_block(Key* slot_keys, int* slot_blocks, Key slot_mask,
   return false;
 }
 
+/// A dense index over a box of block coordinates: the storage index of
+/// every block in the box, -1 where none is allocated. The volume keeps one
+/// around its allocated blocks while it fits its budget
+/// (SparseVolumeParams::index_grid_cells), so that finding a block is one
+/// read instead of a walk along the hash table's probe sequence; the table
+/// stays the record of what is stored. `cells` null: no grid.
+struct BlockGrid {
+  const int* cells = nullptr;
+  int lo[3] = {0, 0, 0};    ///< block coordinates of cell 0
+  int size[3] = {0, 0, 0};  ///< cells along each axis, x fastest
+
+  /// The block at (bx, by, bz): -1 outside the box, which holds every
+  /// allocated block.
+  EMF_HD int find(int bx, int by, int bz) const {
+    // Unsigned differences: below lo wraps to a large value, one test a side.
+    const unsigned ux = unsigned(bx) - unsigned(lo[0]), uy = unsigned(by) - unsigned(lo[1]),
+                   uz = unsigned(bz) - unsigned(lo[2]);
+    if (ux >= unsigned(size[0]) || uy >= unsigned(size[1]) || uz >= unsigned(size[2])) return -1;
+    return cells[(std::int64_t(uz) * size[1] + uy) * size[0] + ux];
+  }
+};
+
+/// Writes block first + i into the grid (`cells` writable, its box holding
+/// the block).
+struct ScatterToGrid {
+  const Key* block_keys;
+  int* cells;
+  BlockGrid grid;  // its box
+  int first;
+  EMF_HD void operator()(int i) const {
+    int bx, by, bz;
+    unpack_key(block_keys[first + i], bx, by, bz);
+    const int ux = bx - grid.lo[0], uy = by - grid.lo[1], uz = bz - grid.lo[2];
+    cells[(std::int64_t(uz) * grid.size[1] + uy) * grid.size[0] + ux] = first + i;
+  }
+};
+
 /// Offset of voxel (lx, ly, lz) (0..7 each) inside its block: x fastest.
 EMF_HD inline int local_index(int lx, int ly, int lz) { return (lz * block_side + ly) * block_side + lx; }
 
@@ -139,6 +176,12 @@ struct BlockBox {
       r.hi[a] = hi[a] > other.hi[a] ? hi[a] : other.hi[a];
     }
     return r;
+  }
+  /// True if every block of `other` lies in this box.
+  EMF_HD bool contains(const BlockBox& other) const {
+    for (int a = 0; a < 3; ++a)
+      if (other.lo[a] < lo[a] || other.hi[a] > hi[a]) return false;
+    return true;
   }
 };
 

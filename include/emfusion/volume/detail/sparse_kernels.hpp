@@ -30,12 +30,21 @@ EMF_HD int floor_to_int(S x) {
   return i - (S(i) > x ? 1 : 0);
 }
 
-/// True for keys the table already holds.
+/// True for keys the volume already holds: through its index grid when it
+/// has one, else its table.
 struct IsStored {
   const Key* slot_keys;
   const int* slot_blocks;
   Key slot_mask;
-  EMF_HD bool operator()(Key key) const { return find_block(slot_keys, slot_blocks, slot_mask, key) >= 0; }
+  BlockGrid grid;
+  EMF_HD bool operator()(Key key) const {
+    if (grid.cells) {
+      int bx, by, bz;
+      unpack_key(key, bx, by, bz);
+      return grid.find(bx, by, bz) >= 0;
+    }
+    return find_block(slot_keys, slot_blocks, slot_mask, key) >= 0;
+  }
 };
 
 /// The blocks the truncation band of each valid depth pixel touches that the

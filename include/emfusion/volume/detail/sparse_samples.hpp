@@ -1,12 +1,13 @@
-// Trilinear samples of a sparse TSDF volume, written once for its two
-// readers: SparseTsdfView, whose every sample looks its blocks up in the hash
-// table, and NearbySparseSampler (volume/nearby_samples.hpp), which looks
-// them up in a cache of the last blocks first. Both hand SparseSamples the
-// way they find a block; the arithmetic is this file's, so the two agree bit
-// for bit.
+// Trilinear samples and the empty-space walk of a sparse TSDF volume,
+// written once for its readers: SparseTsdfView, which looks its blocks up in
+// its index grid or its hash table, and the samplers of
+// volume/nearby_samples.hpp (a cache of the last blocks before the table, or
+// the grid alone). Each hands SparseSamples and walk_to_allocated the way it
+// finds a block; the arithmetic is this file's, so all agree bit for bit.
 #pragma once
 
 #include <cmath>
+#include <limits>
 
 #include "emfusion/core/host_device.hpp"
 #include "emfusion/core/math.hpp"
@@ -79,6 +80,66 @@ struct SparseSamples {
     return trilinear::interpolate_observed(v, w, c.fx, c.fy, c.fz, min_coverage, sdf_out);
   }
 };
+
+/// One axis of walk_to_allocated: the direction it steps blocks in, the
+/// distance t of its next block border, and the distance between its
+/// borders (the largest S where the ray runs parallel to it).
+template <class S>
+struct DdaAxis {
+  int step;
+  S next, delta;
+  EMF_HD static DdaAxis of(S p, S d, int b, S side, S t) {
+    if (d > S(0)) return {1, t + (S(b + 1) * side - p) / d, side / d};
+    if (d < S(0)) return {-1, t + (S(b) * side - p) / d, -side / d};
+    const S huge = std::numeric_limits<S>::max();
+    return {0, huge, huge};
+  }
+};
+
+/// Empty-space skipping along the ray o + t d (volume frame, d of any
+/// length but not zero) through `find(bx, by, bz)` (a block's storage index
+/// or -1) over blocks of `side` metres: if the block at o + t d is
+/// allocated, returns false and leaves t alone; otherwise walks the blocks
+/// the ray passes through (a 3D digital differential analyser, one lookup
+/// per block) and returns true with t where the ray enters the first
+/// allocated block, or beyond t_end when there is none before it. Written
+/// with one variable per axis, no arrays indexed at run time: on a CUDA
+/// device those would live in local memory.
+template <class S, class Find>
+EMF_HD bool walk_to_allocated(Find&& find, S side, const Vec3<S>& o, const Vec3<S>& d, S& t, S t_end) {
+  const Vec3<S> p = o + t * d;
+  const S limit = S(block_limit);
+  const S gx = p.x() / side, gy = p.y() / side, gz = p.z() / side;
+  // Written so that NaN fails too; out of range counts as allocated (no skip).
+  if (!(gx >= -limit && gx < limit && gy >= -limit && gy < limit && gz >= -limit && gz < limit)) return false;
+  int bx = int(std::floor(gx)), by = int(std::floor(gy)), bz = int(std::floor(gz));
+  if (find(bx, by, bz) >= 0) return false;
+  const DdaAxis<S> ax = DdaAxis<S>::of(p.x(), d.x(), bx, side, t), ay = DdaAxis<S>::of(p.y(), d.y(), by, side, t),
+                   az = DdaAxis<S>::of(p.z(), d.z(), bz, side, t);
+  S next_x = ax.next, next_y = ay.next, next_z = az.next;
+  // Each axis crosses at most (t_end - t) |d_a| / side + 1 block borders.
+  const S span = (t_end - t) * (std::fabs(d[0]) + std::fabs(d[1]) + std::fabs(d[2])) / side;
+  const int max_blocks = span < S(1 << 24) ? int(span) + 4 : (1 << 24);
+  for (int k = 0; k < max_blocks; ++k) {
+    S t_cross;
+    if (next_x <= next_y && next_x <= next_z) {
+      if (!((t_cross = next_x) <= t_end)) break;
+      bx += ax.step, next_x += ax.delta;
+    } else if (next_y <= next_z) {
+      if (!((t_cross = next_y) <= t_end)) break;
+      by += ay.step, next_y += ay.delta;
+    } else {
+      if (!((t_cross = next_z) <= t_end)) break;
+      bz += az.step, next_z += az.delta;
+    }
+    if (find(bx, by, bz) >= 0) {
+      t = t_cross > t ? t_cross : t;
+      return true;
+    }
+  }
+  t = t_end + side;
+  return true;
+}
 
 template <class S, class Store, class Find>
 EMF_HD SparseSamples<S, Store, Find> samples_of(Find find, const Store* sdf, const Store* weight, S voxel_size,
