@@ -140,8 +140,8 @@ EMF_HD inline int local_index(int lx, int ly, int lz) { return (lz * block_side 
 /// is looked up once (one block seven times in eight), and nothing is
 /// indexed at run time, so on a CUDA device everything stays in registers.
 template <class S, class Store, class Find>
-EMF_HD void gather_eight(Find&& find, int x, int y, int z, const Store* sdf, const Store* weight, S truncation, S* v,
-                         S* w) {
+EMF_HD EMF_INLINE_ON_HOST inline void gather_eight(Find&& find, int x, int y, int z, const Store* sdf,
+                                                   const Store* weight, S truncation, S* v, S* w) {
   const int bx = x >> block_shift, by = y >> block_shift, bz = z >> block_shift;
   const int lx = x & (block_side - 1), ly = y & (block_side - 1), lz = z & (block_side - 1);
   const bool ox = lx == block_side - 1, oy = ly == block_side - 1, oz = lz == block_side - 1;

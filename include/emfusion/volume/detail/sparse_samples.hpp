@@ -27,7 +27,7 @@ struct Corner {
 /// Corner of volume-frame point p; false outside the addressable range, with
 /// a voxel to spare (and for NaN).
 template <class S>
-EMF_HD bool corner_of(const Vec3<S>& p, S voxel_size, Corner<S>& c) {
+EMF_HD EMF_INLINE_ON_HOST inline bool corner_of(const Vec3<S>& p, S voxel_size, Corner<S>& c) {
   const S gx = p.x() / voxel_size - S(0.5), gy = p.y() / voxel_size - S(0.5), gz = p.z() / voxel_size - S(0.5);
   // Written so that NaN coordinates fail the test.
   const S l = S(voxel_limit - 2);
@@ -50,14 +50,15 @@ struct SparseSamples {
 
   /// The eight voxels around c (index bits: 1 -> +x, 2 -> +y, 4 -> +z),
   /// truncation and weight 0 in a block that is not allocated.
-  EMF_HD void gather(const Corner<S>& c, S* v, S* w) const {
+  EMF_HD EMF_INLINE_ON_HOST void gather(const Corner<S>& c, S* v, S* w) const {
     gather_eight(find, c.x, c.y, c.z, sdf, weight, truncation, v, w);
   }
 
   /// Trilinear SDF at p, its interpolated weight (if `weight_out`) and the
   /// interpolant's exact gradient (if `gradient`); false, the outputs left
   /// alone, if one of the eight voxels was never observed.
-  EMF_HD bool sample(const Vec3<S>& p, S& sdf_out, S* weight_out, Vec3<S>* gradient = nullptr) const {
+  EMF_HD EMF_INLINE_ON_HOST bool sample(const Vec3<S>& p, S& sdf_out, S* weight_out,
+                                        Vec3<S>* gradient = nullptr) const {
     Corner<S> c;
     if (!corner_of(p, voxel_size, c)) return false;
     S v[8], w[8];
@@ -72,7 +73,7 @@ struct SparseSamples {
 
   /// Trilinear SDF over the observed voxels of the eight, their weights
   /// renormalised: true where they carry at least `min_coverage` of it.
-  EMF_HD bool sample_observed(const Vec3<S>& p, S& sdf_out, S min_coverage) const {
+  EMF_HD EMF_INLINE_ON_HOST bool sample_observed(const Vec3<S>& p, S& sdf_out, S min_coverage) const {
     Corner<S> c;
     if (!corner_of(p, voxel_size, c)) return false;
     S v[8], w[8];

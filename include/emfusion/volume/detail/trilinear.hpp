@@ -13,7 +13,7 @@ namespace emfusion::detail::trilinear {
 
 /// The trilinear interpolant of the eight corner values at fractions (fx, fy, fz).
 template <class S>
-EMF_HD S interpolate(const S* v, S fx, S fy, S fz) {
+EMF_HD EMF_INLINE_ON_HOST inline S interpolate(const S* v, S fx, S fy, S fz) {
   const S x00 = v[0] + (v[1] - v[0]) * fx, x10 = v[2] + (v[3] - v[2]) * fx;
   const S x01 = v[4] + (v[5] - v[4]) * fx, x11 = v[6] + (v[7] - v[6]) * fx;
   const S y0 = x00 + (x10 - x00) * fy, y1 = x01 + (x11 - x01) * fy;
@@ -22,7 +22,7 @@ EMF_HD S interpolate(const S* v, S fx, S fy, S fz) {
 
 /// The exact gradient of that interpolant, per metre for voxels of `voxel_size`.
 template <class S>
-EMF_HD Vec3<S> gradient(const S* v, S fx, S fy, S fz, S voxel_size) {
+EMF_HD EMF_INLINE_ON_HOST inline Vec3<S> gradient(const S* v, S fx, S fy, S fz, S voxel_size) {
   const S dx = ((v[1] - v[0]) * (1 - fy) + (v[3] - v[2]) * fy) * (1 - fz) +
                ((v[5] - v[4]) * (1 - fy) + (v[7] - v[6]) * fy) * fz;
   const S dy = ((v[2] - v[0]) * (1 - fx) + (v[3] - v[1]) * fx) * (1 - fz) +
@@ -36,7 +36,8 @@ EMF_HD Vec3<S> gradient(const S* v, S fx, S fy, S fz, S voxel_size) {
 /// interpolation weights renormalised: false unless they carry at least
 /// `min_coverage` of the weight.
 template <class S>
-EMF_HD bool interpolate_observed(const S* v, const S* w, S fx, S fy, S fz, S min_coverage, S& out) {
+EMF_HD EMF_INLINE_ON_HOST inline bool interpolate_observed(const S* v, const S* w, S fx, S fy, S fz, S min_coverage,
+                                                           S& out) {
   S sum = S(0), covered = S(0);
   for (int k = 0; k < 8; ++k) {
     if (!(w[k] > S(0))) continue;
