@@ -508,8 +508,10 @@ class SparseTsdfVolume {
       padded.hi[a] = std::min(box_.hi[a] + pad, detail::sparse::block_limit - 1);
     }
     const detail::sparse::BlockBox grid_box = cells_of(padded) <= grid_limit() ? padded : box_;
-    backend_.synchronize();  // kernels in flight may read the old grid
-    if (cells_of(grid_box) > grid_limit()) {
+    const bool fits = cells_of(grid_box) <= grid_limit();
+    if (!fits && grid_cells_.empty()) return;  // none to build, none to free: no wait for the backend
+    backend_.synchronize();                    // kernels in flight may read the old grid
+    if (!fits) {
       grid_on_ = false;
       typename B::template Vector<int>().swap(grid_cells_);
       return;
