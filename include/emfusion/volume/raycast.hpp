@@ -159,7 +159,8 @@ struct Crossing {
   static constexpr int samples = 4;
   S ta = S(0), fa = S(0), tb = S(0), fb = S(0), t = S(0);
   Crossing() = default;
-  EMF_HD Crossing(S ta_, S fa_, S tb_, S fb_) : ta(ta_), fa(fa_), tb(tb_), fb(fb_), t(ta + (tb - ta) * fa / (fa - fb)) {}
+  EMF_HD Crossing(S ta_, S fa_, S tb_, S fb_)
+      : ta(ta_), fa(fa_), tb(tb_), fb(fb_), t(ta + (tb - ta) * fa / (fa - fb)) {}
   EMF_HD bool update(S f) {
     if (f > S(0)) {
       ta = t, fa = f;
@@ -292,40 +293,11 @@ struct RaycastPixel {
       miss(i);
       return;
     }
-    if constexpr (!is_dense_view<View>) {
+    if constexpr (is_dense_view<View>) {
+      march_then_refine(volume, i, ray_cam, origin, dir, t, t_end);
+    } else {
       with_nearby_sampler<ray_cache_blocks>(
           volume, [&](auto& sampler) { march_one_site(sampler, i, ray_cam, origin, dir, t, t_end); });
-    } else {
-      // A dense volume: the march samples the view, and at a crossing refines
-      // it in a loop of its own (refine).
-      const S trunc = volume.truncation, vs = volume.voxel_size;
-      const S truncated = trunc * S(0.999);  // above every rounding of trunc, even in half precision
-      bool have_prev = false;
-      S t_prev = t, f_prev = S(0);
-      const int steps = max_steps(t, t_end);
-      for (int k = 0; k < steps && t <= t_end; ++k) {
-        S f;
-        if (!volume.sample_observed(origin + t * dir, f)) {
-          have_prev = false;  // unobserved space: no crossing can be trusted
-          t = skip_unobserved(volume, origin, dir, t, t_end);
-          continue;
-        }
-        if (have_prev && f_prev > S(0) && f <= S(0)) {
-          const S t_hit = refine(volume, origin, dir, t_prev, f_prev, t, f);
-          const Vec3<S> p_hit = origin + t_hit * dir;
-          if (drawn(p_hit)) {
-            write_hit(volume, i, ray_cam, t_hit, p_hit);
-            return;
-          }
-        }
-        // Leaving a surface from behind ends the ray, unless that surface was
-        // skipped as background of an object volume.
-        if (have_prev && f_prev < S(0) && f > S(0) && foreground.empty()) break;
-        have_prev = true;
-        t_prev = t, f_prev = f;
-        t += f >= truncated ? trunc : (f > vs ? S(0.5) * f : S(0.5) * vs);
-      }
-      miss(i);
     }
   }
 
@@ -365,23 +337,35 @@ struct RaycastPixel {
     return foreground.empty() || foreground.probability(p_hit) > params.min_foreground;
   }
 
-  /// Regula falsi on [ta, tb] with f(ta) > 0 >= f(tb), Crossing's steps in
-  /// a loop: the dense march's.
+  /// The march of a dense volume: samples along the ray, and at a crossing
+  /// its refinement (Crossing) in a loop of its own.
   template <class Sampler>
-  EMF_HD S refine(Sampler& sampler, const Vec3<S>& o, const Vec3<S>& d, S ta, S fa, S tb, S fb) const {
-    S t = ta + (tb - ta) * fa / (fa - fb);
-    for (int it = 0; it < Crossing<S>::samples; ++it) {
+  EMF_HD void march_then_refine(Sampler& sampler, int i, const Vec3<S>& ray_cam, const Vec3<S>& origin,
+                                const Vec3<S>& dir, S t, S t_end) const {
+    March m(t, volume.truncation, volume.voxel_size);
+    const int steps = max_steps(t, t_end);
+    for (int k = 0; k < steps && t <= t_end; ++k) {
       S f;
-      if (!sampler.sample_observed(o + t * d, f)) break;
-      if (f > S(0)) {
-        ta = t, fa = f;
-      } else {
-        tb = t, fb = f;
+      if (!sampler.sample_observed(origin + t * dir, f)) {
+        m.have_prev = false;  // unobserved space: no crossing can be trusted
+        t = skip_unobserved(volume, origin, dir, t, t_end);
+        continue;
       }
-      if (!(fa - fb > S(0))) break;
-      t = ta + (tb - ta) * fa / (fa - fb);
+      if (m.crosses(f)) {
+        Crossing<S> c(m.t_prev, m.f_prev, t, f);
+        for (int it = 0; it < Crossing<S>::samples; ++it) {
+          S fc;
+          if (!sampler.sample_observed(origin + c.t * dir, fc) || !c.update(fc)) break;
+        }
+        const Vec3<S> p_hit = origin + c.t * dir;
+        if (drawn(p_hit)) {
+          write_hit(sampler, i, ray_cam, c.t, p_hit);
+          return;
+        }
+      }
+      if (!m.on(t, f, !foreground.empty())) break;
     }
-    return t;
+    miss(i);
   }
 
   /// The march of a sparse volume, with one place that takes every sample:
@@ -391,7 +375,7 @@ struct RaycastPixel {
   /// sampling code (eight block lookups): on the H100 the sparse kernel ran
   /// 0.83 ms instead of 1.20 (0.58 instead of 0.80 through the index grid),
   /// where the dense one, whose samples are cheap, ran 0.43 ms instead of
-  /// 0.37 and so keeps its refinement in a loop of its own.
+  /// 0.37 and so keeps march_then_refine.
   template <class Sampler>
   EMF_HD void march_one_site(Sampler& sampler, int i, const Vec3<S>& ray_cam, const Vec3<S>& origin,
                              const Vec3<S>& dir, S t, S t_end) const {

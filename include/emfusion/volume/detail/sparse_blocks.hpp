@@ -96,7 +96,7 @@ EMF_HD inline bool insert_block(Key* slot_keys, int* slot_blocks, Key slot_mask,
 /// A dense index over a box of block coordinates: the storage index of
 /// every block in the box, -1 where none is allocated. The volume keeps one
 /// around its allocated blocks while it fits its budget
-/// (SparseVolumeParams::index_grid_cells), so that finding a block is one
+/// (SparseVolumeParams::grid_cells_per_block), so that finding a block is one
 /// read instead of a walk along the hash table's probe sequence; the table
 /// stays the record of what is stored. `cells` null: no grid.
 struct BlockGrid {
@@ -111,7 +111,11 @@ struct BlockGrid {
     const unsigned ux = unsigned(bx) - unsigned(lo[0]), uy = unsigned(by) - unsigned(lo[1]),
                    uz = unsigned(bz) - unsigned(lo[2]);
     if (ux >= unsigned(size[0]) || uy >= unsigned(size[1]) || uz >= unsigned(size[2])) return -1;
-    return cells[(std::int64_t(uz) * size[1] + uy) * size[0] + ux];
+    return cells[cell(int(ux), int(uy), int(uz))];
+  }
+  /// The cell of offsets (ux, uy, uz) from lo, each within size: x fastest.
+  EMF_HD std::int64_t cell(int ux, int uy, int uz) const {
+    return (std::int64_t(uz) * size[1] + uy) * size[0] + ux;
   }
 };
 
@@ -125,8 +129,7 @@ struct ScatterToGrid {
   EMF_HD void operator()(int i) const {
     int bx, by, bz;
     unpack_key(block_keys[first + i], bx, by, bz);
-    const int ux = bx - grid.lo[0], uy = by - grid.lo[1], uz = bz - grid.lo[2];
-    cells[(std::int64_t(uz) * grid.size[1] + uy) * grid.size[0] + ux] = first + i;
+    cells[grid.cell(bx - grid.lo[0], by - grid.lo[1], bz - grid.lo[2])] = first + i;
   }
 };
 
