@@ -15,6 +15,12 @@
 // where its size heuristics would call it: a sparse volume's sample (the
 // corner, the gather of eight voxels, the interpolation) came out of line
 // under g++ -O3 in the system's hottest loops. Device code is left to nvcc.
+//
+// EMF_AVX2_CLONE compiles a vectorised CPU loop twice, for x86-64's baseline
+// (SSE2, what a portable build may assume) and for AVX2 (twice the lanes),
+// and picks one when the program loads (g++'s target_clones): the AVX2
+// copy on processors that have it. Nothing else changes: without FMA the
+// lanes round as the baseline's do. Only in g++'s x86-64 host code.
 #pragma once
 
 #if defined(__CUDACC__)
@@ -33,3 +39,8 @@
 #define EMF_INLINE_ON_HOST __attribute__((always_inline))
 #endif
 
+#if defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__) && !defined(__CUDACC__)
+#define EMF_AVX2_CLONE __attribute__((target_clones("avx2", "default")))
+#else
+#define EMF_AVX2_CLONE
+#endif

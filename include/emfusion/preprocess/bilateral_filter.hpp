@@ -111,7 +111,7 @@ struct BilateralRow {
   EMF_HD static bool valid_depth_mask(double d) { return is_valid_depth(d); }
   EMF_HD static double masked(double x, bool keep) { return keep ? x : 0.0; }
 
-  EMF_HD void operator()(int y) const {
+  EMF_AVX2_CLONE void operator()(int y) const {
     const int w = depth.width;
     for (int x0 = 0; x0 < w; x0 += chunk) {
       const int n = w - x0 < chunk ? w - x0 : chunk;
