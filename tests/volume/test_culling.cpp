@@ -65,7 +65,7 @@ TEMPLATE_TEST_CASE("max_valid_depth ignores holes, NaN and infinities", "[volume
 
 TEMPLATE_TEST_CASE("The silhouette guard's minimum filter matches a direct search", "[volume]", float, double) {
   using S = TestType;
-  const int w = 37, h = 23;
+  const int w = 301, h = 23;  // wider than NearestDepthRows::chunk: three chunks a row
   std::mt19937 rng(11);
   std::uniform_real_distribution<double> u(0, 1);
   std::vector<S> pixels(std::size_t(w) * h);
@@ -97,6 +97,20 @@ TEMPLATE_TEST_CASE("The silhouette guard's minimum filter matches a direct searc
         INFO("pixel (" << x << ", " << v << "), pass along " << (dx ? "rows" : "columns"));
         REQUIRE(got[std::size_t(v) * w + x] == nearest);
       }
+    // The CPU's row-chunked form (the system's path) gives the same values,
+    // over the whole image and over a box (pixels outside it untouched).
+    for (const PixelBox box : {PixelBox::whole(w, h), PixelBox{3, 2, 290, 19}}) {
+      Image<S, Host> rows(w, h, S(-1));
+      detail::nearest_depth_pass(Host{}, box,
+                                 detail::NearestDepthPass<S>{depth.view(), depth.view(), rows.view(), lateral, dx, 1 - dx});
+      const auto by_rows = rows.to_host();
+      for (int v = 0; v < h; ++v)
+        for (int x = 0; x < w; ++x) {
+          INFO("pixel (" << x << ", " << v << "), box " << box.x0 << " " << box.y0 << " " << box.x1 << " " << box.y1);
+          const std::size_t i = std::size_t(v) * w + x;
+          REQUIRE(by_rows[i] == (box.contains(x, v) ? got[i] : S(-1)));
+        }
+    }
   }
 }
 

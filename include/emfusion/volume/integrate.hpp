@@ -261,6 +261,87 @@ struct NearestDepthPass {
   }
 };
 
+/// NearestDepthPass on the CPU, a row of the output a call (the pixels of
+/// columns [x0, x1)), in chunks of columns: the window's offsets outside,
+/// the chunk's pixels inside, so that the inner loop has no branch and
+/// vectorises (a pixel at a time, the two passes took 17 ms of a frame on 2
+/// cores). The same minimum of the same depths as NearestDepthPass: holes,
+/// NaN and inf count as +inf, out of the image as well.
+template <class S>
+struct NearestDepthRows {
+  NearestDepthPass<S> pass;
+  int x0, x1;
+  static constexpr int chunk = 128, r_max = NearestDepthPass<S>::max_radius;
+
+  EMF_HD static S candidate(S n) {
+    const S none = std::numeric_limits<S>::infinity();
+    return n > S(0) && n < none ? n : none;
+  }
+
+  EMF_AVX2_CLONE void operator()(int v) const {
+    const ImageView<const S>& in = pass.in;
+    const int width = in.width, height = in.height;
+    const S none = std::numeric_limits<S>::infinity();
+    for (int c0 = x0; c0 < x1; c0 += chunk) {
+      const int n = x1 - c0 < chunk ? x1 - c0 : chunk;
+      S radius[chunk], nearest[chunk];
+      S row[chunk + 2 * r_max];  // along rows: the chunk's input and r_max either side
+      int k_max = 0;
+      for (int i = 0; i < n; ++i) {
+        const S d = pass.depth(c0 + i, v);
+        int r = 0;
+        if (is_valid_depth(d)) {
+          const S rr = std::ceil(pass.lateral_pixels_at_1m / d);
+          r = rr < S(r_max) ? int(rr) : r_max;
+        }
+        radius[i] = S(r);
+        k_max = r > k_max ? r : k_max;
+        nearest[i] = candidate(in(c0 + i, v));
+      }
+      if (pass.dx) {
+        for (int i = -r_max; i < n + r_max; ++i) {
+          const int u = c0 + i;
+          row[i + r_max] = u >= 0 && u < width ? candidate(in(u, v)) : none;
+        }
+        for (int k = 1; k <= k_max; ++k) {
+          const S* left = row + r_max - k;
+          const S* right = row + r_max + k;
+          for (int i = 0; i < n; ++i) {
+            const S a = left[i] < right[i] ? left[i] : right[i];
+            const S m = a < nearest[i] ? a : nearest[i];
+            nearest[i] = S(k) <= radius[i] ? m : nearest[i];
+          }
+        }
+      } else {
+        for (int k = 1; k <= k_max; ++k) {
+          const S* above = v - k >= 0 ? &in(c0, v - k) : nullptr;
+          const S* below = v + k < height ? &in(c0, v + k) : nullptr;
+          for (int i = 0; i < n; ++i) {
+            const S a = above ? candidate(above[i]) : none, b = below ? candidate(below[i]) : none;
+            const S ab = a < b ? a : b;
+            const S m = ab < nearest[i] ? ab : nearest[i];
+            nearest[i] = S(k) <= radius[i] ? m : nearest[i];
+          }
+        }
+      }
+      for (int i = 0; i < n; ++i) pass.out(c0 + i, v) = nearest[i] < none ? nearest[i] : S(0);
+    }
+  }
+};
+
+/// Runs NearestDepthPass `pass` over the pixels of `box`: a thread a pixel
+/// on a device, NearestDepthRows on the CPU.
+template <class S, Backend B>
+void nearest_depth_pass(const B& backend, const PixelBox& box, const NearestDepthPass<S>& pass) {
+  if (box.empty()) return;
+  if constexpr (B::is_device)
+    for_each_pixel_in(backend, box, pass.depth.width, pass);
+  else
+    for_each_index(backend, box.height(), [f = NearestDepthRows<S>{pass, box.x0, box.x1}, y0 = box.y0](int r) {
+      f(y0 + r);
+    });
+}
+
 template <class S>
 struct ValidDepthOrZero {
   ImageView<const S> depth;
@@ -324,10 +405,10 @@ VoxelUpdate<S> prepare_voxel_update(const Image<S, B>& depth, const PinholeCamer
     // The column pass reads the row pass up to max_radius rows away.
     const PixelBox row_box =
         box.grown(0, detail::NearestDepthPass<S>::max_radius, depth.width(), depth.height());
-    for_each_pixel_in(backend, row_box, depth.width(),
-                      detail::NearestDepthPass<S>{depth.view(), depth.view(), rows.view(), lateral, 1, 0});
-    const detail::NearestDepthPass<S> columns{depth.view(), std::as_const(rows).view(), near.view(), lateral, 0, 1};
-    for_each_pixel_in(backend, box, depth.width(), columns);
+    detail::nearest_depth_pass(backend, row_box,
+                               detail::NearestDepthPass<S>{depth.view(), depth.view(), rows.view(), lateral, 1, 0});
+    detail::nearest_depth_pass(
+        backend, box, detail::NearestDepthPass<S>{depth.view(), std::as_const(rows).view(), near.view(), lateral, 0, 1});
     near_depth = std::as_const(near).view();
   }
   return VoxelUpdate<S>{
