@@ -394,6 +394,58 @@ TEMPLATE_LIST_TEST_CASE("An object that left the view is re-identified when dete
   }
 }
 
+TEMPLATE_LIST_TEST_CASE("A model fits a frame only where the frame does not see through it", "[slam]",
+                        emfusion::test::SystemRuleConfigs) {
+  using S = typename TestType::Scalar;
+  using B = typename TestType::Backend;
+  // A ball 1.5 m ahead of a wall 2 m ahead, fused into an object model from
+  // one view with the ball as its detection.
+  const PinholeCamera<S> camera = BoxScene<S>().camera;
+  const auto plane_at = [](S z) {
+    return sim::make_plane(sim::look_at(vec3(S(0), S(0), z), Vec3<S>::zero(), vec3(S(0), S(-1), S(0))));
+  };
+  sim::Scene<S> with_ball, wall_only;
+  with_ball.add(plane_at(S(2)));
+  with_ball.add(sim::make_sphere(vec3(S(0), S(0), S(1.5)), S(0.1)));
+  wall_only.add(plane_at(S(2)));
+  const auto frame_of = [&](const sim::Scene<S>& scene, Image<int, Host>* labels = nullptr) {
+    Image<S, Host> d;
+    sim::render_depth(scene, camera, SE3<S>::identity(), d, labels);
+    Frame<S, B> f;
+    f.depth = d.template to<B>();
+    back_project(f.depth, camera, f.points);
+    return f;
+  };
+  Image<int, Host> labels;
+  const Frame<S, B> seen = frame_of(with_ball, &labels);
+  ObjectModel<S, B> ball(1, "sports_ball", SE3<S>::translation(vec3(S(0), S(0), S(1.5))), 64, S(0.005), S(4));
+  std::vector<std::uint8_t> mask_px;
+  for (int l : labels.to_host()) mask_px.push_back(std::uint8_t(l == 1));
+  const auto mask = Image<std::uint8_t, Host>::from_host(camera.width, camera.height, mask_px).template to<B>();
+  const Image<S, B> weights = Image<S, Host>::from_host(camera.width, camera.height,
+                                                        std::vector<S>(mask_px.begin(), mask_px.end()))
+                                  .template to<B>();
+  const Image<std::uint8_t, B> counted(camera.width, camera.height, std::uint8_t(1));
+  for (int k = 0; k < 3; ++k) {
+    integrate(ball.volume(), seen.depth, camera, SE3<S>::identity(), &weights);
+    update_foreground(ball.foreground(), ball.volume().pose(), ball.volume().truncation(), seen.depth, mask, counted,
+                      camera, SE3<S>::identity(), ball.volume().backend());
+  }
+  const SE3<S> T_volume_camera = ball.volume().pose().inverse();  // the camera at the world origin
+  const Image<S, B>& in_mask = weights;  // the detection's pixels
+  using detail::reidentification::consistent_with_frame;
+  // Where the ball is seen: the frame shows it.
+  CHECK(consistent_with_frame(ball, T_volume_camera, seen, in_mask, camera));
+  // The same place with the ball gone: the frame sees the wall through it.
+  CHECK_FALSE(consistent_with_frame(ball, T_volume_camera, frame_of(wall_only), in_mask, camera));
+  // The ball sunk 0.7 m deeper, behind the wall: the frame shows the wall, not the ball.
+  CHECK_FALSE(consistent_with_frame(ball, SE3<S>::translation(vec3(S(0), S(0), S(-0.7))) * T_volume_camera, seen,
+                                    in_mask, camera));
+  // A detection elsewhere in the image: the ball draws nothing there.
+  const Image<S, B> elsewhere(camera.width, camera.height, S(0));
+  CHECK_FALSE(consistent_with_frame(ball, T_volume_camera, seen, elsewhere, camera));
+}
+
 TEMPLATE_LIST_TEST_CASE("With lost_object_frames = 0 an object that left the view is gone for good", "[slam]",
                         emfusion::test::HeavyConfigs) {
   using S = typename TestType::Scalar;

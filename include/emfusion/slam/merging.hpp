@@ -188,7 +188,10 @@ std::vector<ObjectMerge> merge_objects(Map<S, B>& map, const Frame<S, B>& frame,
                                                                          map.T_world_camera, params, norm, solver);
       if (inliers > best_inliers) best = int(c), best_inliers = inliers, best_T = T;
     }
-    if (best < 0 || best_inliers < params.merge_min_inliers) continue;
+    if (best < 0 || best_inliers < params.merge_min_inliers ||
+        !detail::reidentification::consistent_with_frame(*candidates[std::size_t(best)].object, best_T, frame,
+                                                       target->mask, camera))
+      continue;
     ObjectModel<S, B>& a = *candidates[std::size_t(best)].object;
     const int lost_index = candidates[std::size_t(best)].lost;
     // A's pose where the detection puts it; the survivor is the older id.

@@ -8,6 +8,7 @@
 // detection (relocalize_objects).
 #pragma once
 
+#include <cmath>
 #include <cstddef>
 #include <cstdint>
 #include <memory>
@@ -15,6 +16,8 @@
 #include <string>
 #include <utility>
 #include <vector>
+
+#include <thrust/functional.h>
 
 #include "emfusion/detect/detection.hpp"
 #include "emfusion/detect/matching.hpp"
@@ -26,6 +29,7 @@
 #include "emfusion/slam/map.hpp"
 #include "emfusion/slam/tracking.hpp"
 #include "emfusion/solve/sdf_alignment.hpp"
+#include "emfusion/volume/raycast.hpp"
 
 namespace emfusion {
 
@@ -39,6 +43,27 @@ struct OffSurfaceCount {
   S delta;
   EMF_HD S cost(S r) const { return std::fabs(r) < delta ? S(0) : S(1); }
   EMF_HD S weight(S) const { return S(1); }
+};
+
+/// Of the pixels of a detection (`mask`) that an object's model draws
+/// (`hit`, at `depth`), how many show the measured surface within
+/// `tolerance` of the model's.
+struct DrawnPixels {
+  int drawn = 0, agree = 0;
+  EMF_HD DrawnPixels operator+(const DrawnPixels& o) const { return {drawn + o.drawn, agree + o.agree}; }
+};
+template <class S>
+struct CountDrawnPixels {
+  ImageView<const std::uint8_t> hit;
+  ImageView<const S> depth;
+  ImageView<const Vec3<S>> points;
+  ImageView<const S> mask;
+  S tolerance;
+  EMF_HD DrawnPixels operator()(int i) const {
+    if (!hit[i] || !(mask[i] > S(0))) return {};
+    const S z = points[i].z();
+    return {1, std::isfinite(z) && std::fabs(z - depth[i]) <= tolerance ? 1 : 0};
+  }
 };
 
 }  // namespace detail::reidentification
@@ -115,6 +140,32 @@ std::pair<double, SE3<S>> fit_to_target(const ObjectModel<S, B>& o, const Detect
   return {best_inliers, best_T};
 }
 
+/// Whether object `o`, placed at T_volume_camera (a fit_to_target), is
+/// what the frame shows in the detection's pixels `mask`: its model, drawn
+/// there (surfaces of p_fg above 1/2, as RaycastParams draws objects),
+/// must show in at least half of the mask's pixels it covers, within the
+/// volume's truncation of the measured depth. The share of a detection's
+/// points on the model's surface (fit_to_target) is one-sided: an object's
+/// volume also holds what was fused around it (the floor under a cup, a
+/// wall behind it), and a false positive of the object's class on bare
+/// floor or wall fitted that patch, with the object itself standing out in
+/// front of the floor or sunk behind it (on synthetic:corridor a lost cup
+/// came back onto a wall 5 m from where it was).
+template <class S, Backend B>
+bool consistent_with_frame(const ObjectModel<S, B>& o, const SE3<S>& T_volume_camera, const Frame<S, B>& frame,
+                           const Image<S, B>& mask, const PinholeCamera<S>& camera) {
+  RaycastResult<S, B> drawn;
+  RaycastParams<S> rp;
+  rp.surface = false;
+  raycast(o.volume(), camera, o.volume().pose() * T_volume_camera, drawn, rp, &o.foreground());
+  const DrawnPixels n = transform_reduce_index(
+      frame.points.backend(), frame.points.size(),
+      CountDrawnPixels<S>{std::as_const(drawn.hit).view(), std::as_const(drawn.depth).view(), frame.points.view(),
+                          mask.view(), o.volume().truncation()},
+      DrawnPixels{}, thrust::plus<DrawnPixels>());
+  return n.drawn > 0 && 2 * n.agree >= n.drawn;
+}
+
 /// The mean association of Map::objects[k] over the pixels it is drawn on
 /// (`seg` on the host), from the frame's association images; 1 when they
 /// do not cover it (the E-step did not run) or it is drawn nowhere.
@@ -134,7 +185,8 @@ double mean_association(const Frame<S, B>& frame, const std::vector<int>& seg, i
 /// Tries to bring back a lost object of detection d's class: each is
 /// aligned to the detection's points as detail::reidentification::fit_to_target
 /// says, and the best with at least params.reidentify_min_inliers of the
-/// points within a Huber delta of its surface wins. The object moves from
+/// points within a Huber delta of its surface wins, if the frame shows
+/// its model where it would put it (consistent_with_frame). The object moves from
 /// map.lost back to map.objects at the solved pose; returns its first-view
 /// weights (`outside`: see first_view_weights). `seg` and `points` are the
 /// frame's segmentation and points on the host.
@@ -159,7 +211,10 @@ std::optional<NewObjectWeights<S, B>> reidentify(Map<S, B>& map, const Frame<S, 
         detail::reidentification::fit_to_target(o, *target, frame, map.T_world_camera, params, norm, solver);
     if (inliers > best_inliers) best = int(k), best_inliers = inliers, best_T = T;
   }
-  if (best < 0 || best_inliers < params.reidentify_min_inliers) return std::nullopt;
+  if (best < 0 || best_inliers < params.reidentify_min_inliers ||
+      !detail::reidentification::consistent_with_frame(*map.lost[std::size_t(best)].object, best_T, frame,
+                                                       target->mask, camera))
+    return std::nullopt;
   std::unique_ptr<ObjectModel<S, B>> obj = std::move(map.lost[std::size_t(best)].object);
   map.lost.erase(map.lost.begin() + best);
   obj->set_pose(map.T_world_camera * best_T.inverse() * obj->T_object_volume().inverse());
@@ -182,8 +237,8 @@ std::optional<NewObjectWeights<S, B>> reidentify(Map<S, B>& map, const Frame<S, 
 /// association over the pixels they are drawn on is below
 /// params.relocalize_below: each is aligned to the detection's points as a
 /// lost object is (reidentify), and the best with at least
-/// reidentify_min_inliers of the points on its surface moves there, with
-/// its id and model. Returns the ids of the objects moved; when there are
+/// reidentify_min_inliers of the points on its surface, and consistent
+/// with the frame there, moves there, with its id and model. Returns the ids of the objects moved; when there are
 /// any, the frame's associations and rendering are out of date: associate
 /// and render_models again before detection handling, which then matches
 /// the detection to the moved object (System does).
@@ -233,7 +288,10 @@ std::vector<int> relocalize_objects(Map<S, B>& map, const Frame<S, B>& frame, co
                                                                          map.T_world_camera, params, norm, solver);
       if (inliers > best_inliers) best = int(k), best_inliers = inliers, best_T = T;
     }
-    if (best < 0 || best_inliers < params.reidentify_min_inliers) continue;
+    if (best < 0 || best_inliers < params.reidentify_min_inliers ||
+        !detail::reidentification::consistent_with_frame(*map.objects[std::size_t(best)], best_T, frame, target->mask,
+                                                       camera))
+      continue;
     ObjectModel<S, B>& obj = *map.objects[std::size_t(best)];
     obj.set_pose(map.T_world_camera * best_T.inverse() * obj.T_object_volume().inverse());
     candidate[std::size_t(best)] = false;
