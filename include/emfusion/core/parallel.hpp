@@ -48,10 +48,11 @@ void for_each_index(const B& backend, Index n, F f) {
     const Index grain = std::max<Index>(Index(1), Index(n / (Index(omp_get_max_threads()) * Index(16))));
 #pragma omp parallel for schedule(dynamic, grain)
     for (Index i = 0; i < n; ++i) f(i);
-    return;
-  }
+  } else  // discarded for Host: each loop is compiled once
 #endif
-  thrust::for_each_n(backend.policy(), thrust::counting_iterator<Index>(0), n, f);
+  {
+    thrust::for_each_n(backend.policy(), thrust::counting_iterator<Index>(0), n, f);
+  }
 }
 
 /// Returns op-reduction of f(i) over i in [0, n), starting from init. `op`
