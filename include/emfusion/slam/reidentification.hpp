@@ -147,10 +147,11 @@ std::pair<double, SE3<S>> fit_to_target(const ObjectModel<S, B>& o, const Detect
 /// volume's truncation of the measured depth. The share of a detection's
 /// points on the model's surface (fit_to_target) is one-sided: an object's
 /// volume also holds what was fused around it (the floor under a cup, a
-/// wall behind it), and a false positive of the object's class on bare
-/// floor or wall fitted that patch, with the object itself standing out in
-/// front of the floor or sunk behind it (on synthetic:corridor a lost cup
-/// came back onto a wall 5 m from where it was).
+/// wall behind it), so a false positive of the object's class on bare floor
+/// or wall can fit that patch, with the object itself standing out in
+/// front of it or sunk behind it. (Not caught here: a model whose fused
+/// surroundings count as foreground is drawn as that floor and agrees; on
+/// synthetic:corridor a lost cup so came back 5 m from where it was.)
 template <class S, Backend B>
 bool consistent_with_frame(const ObjectModel<S, B>& o, const SE3<S>& T_volume_camera, const Frame<S, B>& frame,
                            const Image<S, B>& mask, const PinholeCamera<S>& camera) {
@@ -186,10 +187,10 @@ double mean_association(const Frame<S, B>& frame, const std::vector<int>& seg, i
 /// aligned to the detection's points as detail::reidentification::fit_to_target
 /// says, and the best with at least params.reidentify_min_inliers of the
 /// points within a Huber delta of its surface wins, if the frame shows
-/// its model where it would put it (consistent_with_frame). The object moves from
-/// map.lost back to map.objects at the solved pose; returns its first-view
-/// weights (`outside`: see first_view_weights). `seg` and `points` are the
-/// frame's segmentation and points on the host.
+/// its model where it would put it (consistent_with_frame). The object
+/// moves from map.lost back to map.objects at the solved pose; returns its
+/// first-view weights (`outside`: see first_view_weights). `seg` and
+/// `points` are the frame's segmentation and points on the host.
 template <class S, Backend B, class Norm, class Solver>
   requires RobustNorm<Norm, S> && PoseSolver<Solver, S>
 std::optional<NewObjectWeights<S, B>> reidentify(Map<S, B>& map, const Frame<S, B>& frame, const Detections& det,
@@ -238,8 +239,9 @@ std::optional<NewObjectWeights<S, B>> reidentify(Map<S, B>& map, const Frame<S, 
 /// params.relocalize_below: each is aligned to the detection's points as a
 /// lost object is (reidentify), and the best with at least
 /// reidentify_min_inliers of the points on its surface, and consistent
-/// with the frame there, moves there, with its id and model. Returns the ids of the objects moved; when there are
-/// any, the frame's associations and rendering are out of date: associate
+/// with the frame there, moves there, with its id and model. Returns the
+/// ids of the objects moved; when there are any, the frame's associations
+/// and rendering are out of date: associate
 /// and render_models again before detection handling, which then matches
 /// the detection to the moved object (System does).
 template <class S, Backend B, class Norm, class Solver>

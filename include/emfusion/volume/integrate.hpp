@@ -236,6 +236,14 @@ struct NearestDepthPass {
   int dx, dy;
   static constexpr int max_radius = 16;
 
+  /// The window's radius in pixels at a pixel of depth d (0 without a
+  /// measurement).
+  EMF_HD int radius_at(S d) const {
+    if (!is_valid_depth(d)) return 0;
+    const S r = std::ceil(lateral_pixels_at_1m / d);
+    return r < S(max_radius) ? int(r) : max_radius;
+  }
+
   EMF_HD void operator()(int i) const {
     const int u = i % depth.width, v = i / depth.width;
     const S d = depth[i];
@@ -244,8 +252,7 @@ struct NearestDepthPass {
     const S own = in[i];
     S nearest = own > S(0) && own < none ? own : none;
     if (is_valid_depth(d)) {
-      const S r = std::ceil(lateral_pixels_at_1m / d);
-      const int radius = r < S(max_radius) ? int(r) : max_radius;
+      const int radius = radius_at(d);
       // The window clipped to the image once, so the loop has no branches.
       const int at = dx ? u : v, size = dx ? in.width : in.height;
       const int k0 = at - radius < 0 ? -at : -radius;
@@ -288,12 +295,7 @@ struct NearestDepthRows {
       S row[chunk + 2 * r_max];  // along rows: the chunk's input and r_max either side
       int k_max = 0;
       for (int i = 0; i < n; ++i) {
-        const S d = pass.depth(c0 + i, v);
-        int r = 0;
-        if (is_valid_depth(d)) {
-          const S rr = std::ceil(pass.lateral_pixels_at_1m / d);
-          r = rr < S(r_max) ? int(rr) : r_max;
-        }
+        const int r = pass.radius_at(pass.depth(c0 + i, v));
         radius[i] = S(r);
         k_max = r > k_max ? r : k_max;
         nearest[i] = candidate(in(c0 + i, v));
