@@ -4,6 +4,7 @@
 #include <cmath>
 #include <cstring>
 #include <random>
+#include <type_traits>
 #include <vector>
 
 #include "emfusion/core/image.hpp"
@@ -22,6 +23,20 @@ struct SumCount {
   EMF_HD SumCount& operator+=(const SumCount& o) {
     sum += o.sum, count += o.count;
     return *this;
+  }
+  static constexpr int components = 2;  // a ComponentSum, for grouped_accumulate
+  EMF_HD double& component(int c) { return c == 0 ? sum : count; }
+  EMF_HD double component(int c) const { return c == 0 ? sum : count; }
+};
+
+/// grouped_accumulate's last step: group g's sum into out[g], and a mark
+/// that g was finished (once).
+struct StoreGroup {
+  SumCount* out;
+  int* calls;
+  EMF_HD void operator()(int g, const SumCount& sum) const {
+    out[g] = sum;
+    calls[g] += 1;
   }
 };
 
@@ -89,6 +104,48 @@ TEMPLATE_LIST_TEST_CASE("accumulate_index adds in-place contributions of every i
     INFO("n = " << n);
     CHECK(s.sum == sum);
     CHECK(s.count == count);
+  }
+}
+
+TEMPLATE_LIST_TEST_CASE("grouped_accumulate sums every group of segments once and finishes each group once",
+                        "[solve]", emfusion::test::AllConfigs) {
+  using B = typename TestType::Backend;
+  const B backend{};
+  // Four groups: 3 segments, 1 empty segment, 200 segments, 1 segment; the
+  // indices end to end. Run twice: the device's counters must be back at 0.
+  std::vector<int> offsets{0}, first_segment{0}, group_of;
+  const std::vector<std::vector<int>> sizes = {{700, 1, 5000}, {0}, std::vector<int>(200, 97), {3}};
+  for (std::size_t g = 0; g < sizes.size(); ++g) {
+    for (const int n : sizes[g]) offsets.push_back(offsets.back() + n), group_of.push_back(int(g));
+    first_segment.push_back(int(offsets.size()) - 1);
+  }
+  const auto on_backend = [](const auto& v) {
+    typename B::template Vector<typename std::decay_t<decltype(v)>::value_type> d(v.begin(), v.end());
+    return d;
+  };
+  auto d_offsets = on_backend(offsets), d_first = on_backend(first_segment), d_group = on_backend(group_of);
+  typename B::template Vector<unsigned> counters(sizes.size(), 0u);
+  typename B::template Vector<SumCount> partials(group_of.size()), out(sizes.size());
+  typename B::template Vector<int> calls(sizes.size(), 0);
+  const auto raw = [](auto& v) { return thrust::raw_pointer_cast(v.data()); };
+  const SegmentGroups layout{int(group_of.size()), int(sizes.size()), raw(d_offsets), raw(d_first), raw(d_group),
+                             raw(counters)};
+  for (int run = 1; run <= 2; ++run) {
+    grouped_accumulate(backend, layout, AddMultiplesOfThree{}, SumCount{}, raw(partials),
+                       StoreGroup{raw(out), raw(calls)});
+    backend.synchronize();
+    const std::vector<SumCount> sums(out.begin(), out.end());
+    const std::vector<int> finished(calls.begin(), calls.end());
+    for (std::size_t g = 0; g < sizes.size(); ++g) {
+      double sum = 0, count = 0;
+      for (int i = offsets[std::size_t(first_segment[g])]; i < offsets[std::size_t(first_segment[g + 1])]; ++i)
+        if (i % 3 == 0) sum += double(i), count += 1;
+      INFO("run " << run << ", group " << g);
+      CHECK(sums[g].component(0) == sum);  // through the const accessor a device sum reads
+      CHECK(sums[g].component(1) == count);
+      CHECK(finished[g] == run);
+    }
+    CHECK(std::vector<unsigned>(counters.begin(), counters.end()) == std::vector<unsigned>(sizes.size(), 0u));
   }
 }
 

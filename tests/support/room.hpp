@@ -6,6 +6,7 @@
 #include <vector>
 
 #include "emfusion/preprocess/vertex_map.hpp"
+#include "emfusion/robust/norms.hpp"
 #include "support/fusion.hpp"
 
 namespace emfusion::test {
@@ -66,5 +67,15 @@ Image<Vec3<S>, B> room_points(const SE3<S>& pose) {
   back_project(depth, room_camera<S>(), points);
   return points;
 }
+
+/// The fused room seen from a known pose off the origin, and the Huber
+/// norm of two voxels: what the alignment tests solve.
+template <class S, class B>
+struct RoomAtKnownPose {
+  TsdfVolume<S, B> volume = fused_room<S, B>();
+  SE3<S> truth = SE3<S>::exp(Vec6<S>{{S(0.03), S(-0.02), S(0.04), S(0.02), S(-0.03), S(0.01)}});
+  Image<Vec3<S>, B> points = room_points<S, B>(truth);
+  HuberNorm<S> huber{S(2) * volume.voxel_size()};
+};
 
 }  // namespace emfusion::test

@@ -8,6 +8,7 @@
 // `Vector<T>` for storage; nothing else about a backend is assumed.
 #pragma once
 
+#include <algorithm>
 #include <concepts>
 #include <cstddef>
 #include <string>
@@ -274,6 +275,34 @@ class ConcurrentLanes<Cuda> {
  private:
   std::vector<cudaStream_t> streams_;
 };
+#endif
+
+/// Copies n values between host memory and memory of `backend`, in the
+/// order of the backend's work: to_backend queues the copy (the host values
+/// may change once it returns), to_host waits for the backend's queued work
+/// and the copy. T must be trivially copyable.
+template <class T>
+void copy_to_backend(const Host&, const T* from, std::size_t n, T* to) {
+  std::copy(from, from + n, to);
+}
+template <class T>
+void copy_to_host(const Host&, const T* from, std::size_t n, T* to) {
+  std::copy(from, from + n, to);
+}
+#if EMFUSION_HAS_CUDA
+template <class T>
+void copy_to_backend(const Cuda& backend, const T* from, std::size_t n, T* to) {
+  if (n == 0) return;
+  detail::check_cuda(cudaMemcpyAsync(to, from, n * sizeof(T), cudaMemcpyHostToDevice, backend.stream),
+                     "copy_to_backend: cudaMemcpyAsync");
+}
+template <class T>
+void copy_to_host(const Cuda& backend, const T* from, std::size_t n, T* to) {
+  if (n == 0) return;
+  detail::check_cuda(cudaMemcpyAsync(to, from, n * sizeof(T), cudaMemcpyDeviceToHost, backend.stream),
+                     "copy_to_host: cudaMemcpyAsync");
+  backend.synchronize();
+}
 #endif
 
 /// What the library needs from a backend.

@@ -20,6 +20,7 @@
 
 #include "emfusion/core/backend.hpp"
 
+
 namespace emfusion {
 
 /// The policy for a reduction on `backend`: its reduction_policy() where it
@@ -97,6 +98,25 @@ struct AddInPlace {
     return a += b;
   }
 };
+/// One segment of grouped_accumulate on the CPU, in index order: through
+/// f.accumulate_range(begin, end, acc) where f has it (it may look up once
+/// what the segment's indices share), else index by index.
+template <class T, class F>
+struct AccumulateSegment {
+  F f;
+  T zero;
+  const int* offsets;
+  T* out;
+  void operator()(int s) const {
+    T acc = zero;
+    if constexpr (requires { f.accumulate_range(offsets[s], offsets[s + 1], acc); }) {
+      f.accumulate_range(offsets[s], offsets[s + 1], acc);
+    } else {
+      for (int i = offsets[s]; i < offsets[s + 1]; ++i) f(i, acc);
+    }
+    out[s] = acc;
+  }
+};
 }  // namespace detail
 
 /// Returns the sum of every index's contribution over [0, n), where f(i, acc)
@@ -121,6 +141,120 @@ T accumulate_index(const B& backend, Index n, F f, const T& zero) {
     T sum = zero;
     for (Index c = 0; c < chunks; ++c) sum += partial[std::size_t(c)];
     return sum;
+  }
+}
+
+/// An accumulator that grouped_accumulate can sum on a device: a fixed
+/// number of doubles, read and written one by one (NormalEquations6).
+template <class T>
+concept ComponentSum = requires(T& t, const T& c, int i) {
+  { T::components } -> std::convertible_to<int>;
+  { t.component(i) } -> std::same_as<double&>;
+  { c.component(i) } -> std::convertible_to<double>;
+};
+
+/// Where grouped_accumulate's segments are: segment s holds the indices
+/// [offsets[s], offsets[s + 1]), group g the segments [first_segment[g],
+/// first_segment[g + 1]), and group_of[s] is the group of segment s. Every
+/// array lives on the backend; `counters` (one per group, zero) is the
+/// device's count of a group's finished segments, back at zero afterwards.
+struct SegmentGroups {
+  int segments = 0, groups = 0;
+  const int* offsets = nullptr;
+  const int* first_segment = nullptr;
+  const int* group_of = nullptr;
+  unsigned* counters = nullptr;
+};
+
+#if EMFUSION_HAS_CUDA
+namespace detail {
+/// grouped_accumulate on a device. Thread block s sums segment s: each
+/// thread the indices offsets[s] + t, + Threads, ..., then the block its
+/// threads' sums number by number (warp shuffles, then one value a warp in
+/// shared memory). The block that completes its group last (an atomic
+/// count) sums the group's segments, in an order fixed by the layout alone,
+/// and calls finish from one thread.
+template <int Threads, class T, class F, class Finish>
+__global__ void __launch_bounds__(Threads)
+    accumulate_groups(F f, T zero, SegmentGroups layout, T* partials, Finish finish) {
+  constexpr int warps = Threads / 32, n = T::components;
+  const int s = int(blockIdx.x), t = int(threadIdx.x);
+  T acc = zero;
+  for (int i = layout.offsets[s] + t; i < layout.offsets[s + 1]; i += Threads) f(i, acc);
+  __shared__ double sums[warps][n];
+  __shared__ bool last;
+#pragma unroll  // constant indices: the accumulator stays in registers
+  for (int c = 0; c < n; ++c) {
+    double v = acc.component(c);
+    for (int d = 16; d > 0; d /= 2) v += __shfl_down_sync(0xffffffffu, v, d);
+    if (t % 32 == 0) sums[t / 32][c] = v;
+  }
+  __syncthreads();
+  if (t < n) {
+    double v = 0;
+    for (int w = 0; w < warps; ++w) v += sums[w][t];
+    partials[s].component(t) = v;
+    __threadfence();  // the partial is visible to every block before the count says so
+  }
+  __syncthreads();
+  const int g = layout.group_of[s];
+  const int first = layout.first_segment[g], count = layout.first_segment[g + 1] - first;
+  if (t == 0) last = atomicAdd(&layout.counters[g], 1u) == unsigned(count - 1);
+  __syncthreads();
+  if (!last) return;
+  __threadfence();
+  // Lane q of component c sums segments first + q, + warps, ...; then the
+  // lanes in order.
+  if (t < warps * n) {
+    const int c = t % n, q = t / n;
+    double v = 0;
+    for (int j = first + q; j < first + count; j += warps) v += __ldcg(&partials[j].component(c));
+    sums[q][c] = v;
+  }
+  __syncthreads();
+  if (t == 0) {
+    T total = zero;
+    for (int c = 0; c < n; ++c) {
+      double v = 0;
+      for (int q = 0; q < warps; ++q) v += sums[q][c];
+      total.component(c) = v;
+    }
+    layout.counters[g] = 0;
+    finish(g, total);
+  }
+}
+}  // namespace detail
+#endif
+
+/// For every group g of segments (SegmentGroups), calls finish(g, sum) with
+/// the sum of the contributions f(i, acc) (as accumulate_index) of every
+/// index of its segments: many reductions, and what follows each, in one
+/// pass, as the batched solves need (solve/batched_solve.hpp). `zero` must
+/// be the empty sum; `partials` holds one T per segment on the backend. On
+/// a device it is one queued kernel that does not wait: a thread block a
+/// segment, and the group's last block to finish sums the group and calls
+/// `finish` (which runs there, on one thread). On the CPU the segments run
+/// in parallel, each in index order, then `finish` group after group.
+/// Either way a sum does not depend on the number of threads.
+template <Backend B, ComponentSum T, class F, class Finish>
+void grouped_accumulate(const B& backend, const SegmentGroups& layout, F f, const T& zero, T* partials,
+                        Finish finish) {
+  if (layout.segments <= 0) return;
+  if constexpr (B::is_device) {
+#if EMFUSION_HAS_CUDA
+    constexpr int threads = 256;
+    static_assert(threads / 32 * T::components <= threads, "a block sums a group with one thread a number");
+    detail::accumulate_groups<threads><<<layout.segments, threads, 0, backend.stream>>>(f, zero, layout, partials,
+                                                                                        finish);
+    detail::check_cuda(cudaGetLastError(), "grouped_accumulate: kernel launch");
+#endif
+  } else {
+    for_each_index(backend, layout.segments, detail::AccumulateSegment<T, F>{f, zero, layout.offsets, partials});
+    for (int g = 0; g < layout.groups; ++g) {
+      T total = zero;
+      for (int j = layout.first_segment[g]; j < layout.first_segment[g + 1]; ++j) total += partials[j];
+      finish(g, total);
+    }
   }
 }
 

@@ -73,6 +73,18 @@ struct NormalEquations6 {
     return M;
   }
   EMF_HD Vec6<double> gradient() const { return Vec6<double>{{g[0], g[1], g[2], g[3], g[4], g[5]}}; }
+
+  /// The 31 numbers one after the other (H, g, cost, terms, shared_cost,
+  /// shared_reference_cost): a reduction may sum them one by one.
+  static constexpr int components = 31;
+  EMF_HD double& component(int c) {
+    if (c < 21) return H[c];
+    if (c < 27) return g[c - 21];
+    if (c == 27) return cost;
+    if (c == 28) return terms;
+    return c == 29 ? shared_cost : shared_reference_cost;
+  }
+  EMF_HD double component(int c) const { return const_cast<NormalEquations6&>(*this).component(c); }
 };
 
 /// `n` with H, g and every cost multiplied by `weight` (the term counts
@@ -144,6 +156,36 @@ class LinearizationCache {
 };
 
 namespace detail {
+/// Adds term i of `problem` at T into n (nothing when it does not take
+/// part), with the shared costs at `reference` when one is given (its values
+/// read from `stored_reference` when known); stores the term's value at T
+/// in `store` when set. The body of every linearisation, batched or not.
+template <class S, class P, class N>
+EMF_HD void add_term(const P& problem, const N& norm, const SE3<S>& T, const SE3<S>* reference,
+                     TermValue<S>* store, const TermValue<S>* stored_reference, int i, NormalEquations6& n) {
+  S r, w;
+  Vec6<S> J;
+  const bool valid = problem.term(i, T, r, J, w) && w > S(0);
+  if (store) store[i] = valid ? TermValue<S>{r, w} : TermValue<S>{S(0), S(-1)};
+  if (!valid) return;
+  const S c = w * norm.cost(r);
+  n.add(J, r, w * norm.weight(r), c);
+  if (!reference) return;
+  S r0, w0;
+  if (stored_reference) {
+    r0 = stored_reference[i].r, w0 = stored_reference[i].w;
+  } else if (!problem.term(i, *reference, r0, J, w0)) {
+    return;
+  }
+  if (w0 > S(0)) {
+    // Both with the weight at the reference: IRLS holds weights fixed
+    // within a step, and weights that vary with the pose (the map
+    // confidence) would otherwise make the cost change disagree with g.
+    n.shared_cost += double(w0 * norm.cost(r));
+    n.shared_reference_cost += double(w0 * norm.cost(r0));
+  }
+}
+
 template <class S, class P, class N>
 struct LinearizeTerm {
   P problem;
@@ -154,29 +196,8 @@ struct LinearizeTerm {
   TermValue<S>* store = nullptr;                   ///< each term's value at T, when set
   const TermValue<S>* stored_reference = nullptr;  ///< the values at the reference, when known
 
-  /// Adds term i (nothing when it does not take part) into n.
   EMF_HD void operator()(int i, NormalEquations6& n) const {
-    S r, w;
-    Vec6<S> J;
-    const bool valid = problem.term(i, T, r, J, w) && w > S(0);
-    if (store) store[i] = valid ? TermValue<S>{r, w} : TermValue<S>{S(0), S(-1)};
-    if (!valid) return;
-    const S c = w * norm.cost(r);
-    n.add(J, r, w * norm.weight(r), c);
-    if (!has_reference) return;
-    S r0, w0;
-    if (stored_reference) {
-      r0 = stored_reference[i].r, w0 = stored_reference[i].w;
-    } else if (!problem.term(i, reference, r0, J, w0)) {
-      return;
-    }
-    if (w0 > S(0)) {
-      // Both with the weight at the reference: IRLS holds weights fixed
-      // within a step, and weights that vary with the pose (the map
-      // confidence) would otherwise make the cost change disagree with g.
-      n.shared_cost += double(w0 * norm.cost(r));
-      n.shared_reference_cost += double(w0 * norm.cost(r0));
-    }
+    add_term(problem, norm, T, has_reference ? &reference : nullptr, store, stored_reference, i, n);
   }
 };
 }  // namespace detail
@@ -211,10 +232,10 @@ NormalEquations6 linearize(const B& backend, const P& problem, const N& norm, co
 
 /// Solves (H + lambda I) x = -g by Cholesky; false if the matrix is not
 /// positive definite, judged relative to its largest diagonal entry.
-inline bool solve_damped(const NormalEquations6& n, double lambda, Vec6<double>& x) {
+EMF_HD inline bool solve_damped(const NormalEquations6& n, double lambda, Vec6<double>& x) {
   Mat6<double> A = n.hessian();
   double scale = 0;
-  for (int i = 0; i < 6; ++i) A(i, i) += lambda, scale = std::max(scale, std::fabs(A(i, i)));
+  for (int i = 0; i < 6; ++i) A(i, i) += lambda, scale = std::fabs(A(i, i)) > scale ? std::fabs(A(i, i)) : scale;
   const double tiny = 1e-12 * scale;
   Mat6<double> L = Mat6<double>::zero();
   for (int j = 0; j < 6; ++j) {

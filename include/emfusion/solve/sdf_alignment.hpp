@@ -11,6 +11,7 @@
 #pragma once
 
 #include <cmath>
+#include <vector>
 
 #include "emfusion/core/image.hpp"
 #include "emfusion/core/pixel_box.hpp"
@@ -18,6 +19,7 @@
 #include "emfusion/core/se3.hpp"
 #include "emfusion/robust/norms.hpp"
 #include "emfusion/volume/nearby_samples.hpp"
+#include "emfusion/solve/batched_solve.hpp"
 #include "emfusion/solve/normal_equations.hpp"
 #include "emfusion/solve/solvers.hpp"
 #include "emfusion/solve/volume_parameter.hpp"
@@ -284,6 +286,42 @@ SE3<S> solve_coarse_to_fine(const B& backend, const SdfAlignmentTerms<S, Volume>
   });
 }
 
+/// solve_coarse_to_fine for many problems at once with Levenberg-Marquardt
+/// (solve_batch): level by level, every problem's terms at that level in one
+/// batch, each starting where its coarser level stopped (or, without a
+/// solution there, where that level started). Fills one report per problem
+/// as solve_coarse_to_fine does.
+template <class S, Backend B, class Volume, class Norm>
+  requires RobustNorm<Norm, S>
+std::vector<SE3<S>> solve_coarse_to_fine_batch(const B& backend, const std::vector<SdfAlignmentTerms<S, Volume>>& terms,
+                                               const std::vector<Norm>& norms, const SdfAlignmentParams<S>& params,
+                                               const LevenbergMarquardt& solver, std::vector<SE3<S>> starts,
+                                               std::vector<SolveReport>& reports, BatchedSolveWorkspace<S, B>& ws) {
+  const std::size_t n = terms.size();
+  detail::require(norms.size() == n && starts.size() == n, "solve_coarse_to_fine_batch",
+                  "need one norm and one start per problem");
+  std::vector<int> iterations(n, 0), accepted(n, 0);
+  std::vector<BatchedProblem<SdfAlignmentTerms<S, Volume>, Norm>> problems(n);
+  for (int level = params.pyramid_levels - 1; level >= 0; --level) {
+    for (std::size_t k = 0; k < n; ++k) problems[k] = {at_level(terms[k], params, level), norms[k]};
+    const LevenbergMarquardt level_solver = solver_at_level(solver, level, params.pyramid_levels);
+    const std::vector<SE3<S>> solved = solve_batch(backend, problems, starts, level_solver.params, reports, ws);
+    for (std::size_t k = 0; k < n; ++k) {
+      iterations[k] += reports[k].iterations, accepted[k] += reports[k].accepted_steps;
+      if (level == 0 || reports[k].converged()) starts[k] = solved[k];
+    }
+  }
+  for (std::size_t k = 0; k < n; ++k) reports[k].iterations = iterations[k], reports[k].accepted_steps = accepted[k];
+  return starts;
+}
+
+/// The rule of agrees_at_least_as_well below, from the linearisations at
+/// the candidate (with the fallback as its reference) and at the fallback.
+inline bool agrees_at_least_as_well(const NormalEquations6& at_candidate, const NormalEquations6& at_fallback) {
+  return at_candidate.shared_cost <= at_candidate.shared_reference_cost &&
+         at_candidate.terms >= 0.9 * at_fallback.terms;
+}
+
 /// Whether the frame agrees at least as well with `candidate` as with
 /// `fallback` (e.g. a motion prediction and the previous pose): at the
 /// coarsest level of `params`, the robust cost over the terms valid at both
@@ -295,10 +333,8 @@ template <class S, Backend B, class Volume, class Norm>
 bool agrees_at_least_as_well(const B& backend, const SdfAlignmentTerms<S, Volume>& terms, const Norm& norm,
                              const SdfAlignmentParams<S>& params, const SE3<S>& candidate, const SE3<S>& fallback) {
   const SdfAlignmentTerms<S, Volume> coarse = at_level(terms, params, params.pyramid_levels - 1);
-  const NormalEquations6 at_candidate = linearize(backend, coarse, norm, candidate, &fallback);
-  const NormalEquations6 at_fallback = linearize(backend, coarse, norm, fallback);
-  return at_candidate.shared_cost <= at_candidate.shared_reference_cost &&
-         at_candidate.terms >= 0.9 * at_fallback.terms;
+  return agrees_at_least_as_well(linearize(backend, coarse, norm, candidate, &fallback),
+                                 linearize(backend, coarse, norm, fallback));
 }
 
 /// Minimises the robust SDF alignment cost over the camera pose in the frame

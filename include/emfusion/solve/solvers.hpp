@@ -120,34 +120,34 @@ concept Linearizer = requires(F f, const SE3<S>& T, const SE3<S>* reference) {
 };
 
 namespace detail {
-inline bool finite(const NormalEquations6& n) {
+EMF_HD inline bool finite(const NormalEquations6& n) {
   for (double h : n.H)
     if (!std::isfinite(h)) return false;
   for (double v : n.g)
     if (!std::isfinite(v)) return false;
   return std::isfinite(n.cost);
 }
-inline double max_diagonal(const NormalEquations6& n) {
+EMF_HD inline double max_diagonal(const NormalEquations6& n) {
   const Mat6<double> H = n.hessian();
   double m = 0;
-  for (int i = 0; i < 6; ++i) m = std::max(m, H(i, i));
+  for (int i = 0; i < 6; ++i) m = H(i, i) > m ? H(i, i) : m;
   return m;
 }
-inline double max_abs(const double* v, int n) {
+EMF_HD inline double max_abs(const double* v, int n) {
   double m = 0;
-  for (int i = 0; i < n; ++i) m = std::max(m, std::fabs(v[i]));
+  for (int i = 0; i < n; ++i) m = std::fabs(v[i]) > m ? std::fabs(v[i]) : m;
   return m;
 }
 /// The step below which a solve has converged: eps2 (|xi(T)| + eps2).
 template <class S>
-double step_norm_limit(const SE3<S>& T, double eps2) {
+EMF_HD double step_norm_limit(const SE3<S>& T, double eps2) {
   const double x = norm(T.template cast<double>().log());
   return eps2 * (x + eps2);
 }
 /// True if applying a step left the pose unchanged in S: the step is below
 /// what the scalar resolves (in float long before eps2 is reached).
 template <class S>
-bool unchanged(const SE3<S>& a, const SE3<S>& b) {
+EMF_HD bool unchanged(const SE3<S>& a, const SE3<S>& b) {
   return max_abs_diff(a.matrix(), b.matrix()) == S(0);
 }
 /// The solvers' pose, in double and in S: steps compose in double, the
@@ -160,21 +160,21 @@ struct SolverPose {
   /// A start whose rotation is not quite orthonormal (products of float
   /// poses) would pass its error on to the result: start at the nearest
   /// rotation.
-  static SolverPose at(const SE3<S>& start) {
+  EMF_HD static SolverPose at(const SE3<S>& start) {
     SolverPose p;
     p.T = start.template cast<double>().orthonormalized();
     p.T_s = p.T.template cast<S>();
     return p;
   }
   /// exp(xi) * T into `next`; false if that leaves the pose unchanged in S.
-  bool step(const Vec6<double>& xi, SolverPose& next) const {
+  EMF_HD bool step(const Vec6<double>& xi, SolverPose& next) const {
     next.T = SE3<double>::exp(xi) * T;
     next.T_s = next.T.template cast<S>();
     return !unchanged(next.T_s, T_s);
   }
 };
 /// Common start: linearise at T0 and check there is something to solve.
-inline bool start(const NormalEquations6& n, double min_terms, SolveReport& report) {
+EMF_HD inline bool start(const NormalEquations6& n, double min_terms, SolveReport& report) {
   report.initial_cost = report.final_cost = n.cost;
   report.terms = n.terms;
   if (!finite(n)) {
@@ -189,66 +189,111 @@ inline bool start(const NormalEquations6& n, double min_terms, SolveReport& repo
 }
 }  // namespace detail
 
+/// Levenberg-Marquardt one linearisation at a time: a state that says at
+/// which pose (and reference) it needs the problem linearised next and
+/// takes that linearisation in advance(), until it is done. The algorithm
+/// is written once here: levenberg_marquardt below runs it in a loop, and
+/// the batched solves (solve/batched_solve.hpp) keep one per problem on the
+/// backend, advanced by a kernel, so that their iterations need no host.
+template <class S>
+struct LevenbergMarquardtIteration {
+  detail::SolverPose<S> pose;  ///< the current pose
+  detail::SolverPose<S> next;  ///< the candidate asked for, once started
+  NormalEquations6 n;          ///< the linearisation at `pose`
+  Vec6<double> xi;             ///< the step from pose to next
+  double mu = 0, nu = 0;
+  double step_limit = 0;  ///< detail::step_norm_limit at `pose` (a log of the pose: kept, not redone each step)
+  SolveReport report;
+  bool started = false;  ///< the linearisation at the start was taken
+  bool done = false;
+
+  EMF_HD static LevenbergMarquardtIteration at(const SE3<S>& start) {
+    LevenbergMarquardtIteration it;
+    it.pose = detail::SolverPose<S>::at(start);
+    it.n = NormalEquations6::zero();
+    return it;
+  }
+  /// The pose to linearise at next.
+  EMF_HD const SE3<S>& target() const { return started ? next.T_s : pose.T_s; }
+  /// Its reference pose (the current one), or null for the start.
+  EMF_HD const SE3<S>* reference() const { return started ? &pose.T_s : nullptr; }
+
+  /// Takes the linearisation at target(); false once the solve is done
+  /// (`report` and `pose` then hold its outcome).
+  EMF_HD bool advance(const LevenbergMarquardtParams& p, const NormalEquations6& at_target) {
+    if (done) return false;
+    if (!started) {
+      started = true;
+      n = at_target;
+      if (!detail::start(n, p.min_terms, report)) return finish();
+      mu = p.tau * detail::max_diagonal(n);
+      nu = p.nu;
+      step_limit = detail::step_norm_limit(pose.T, p.eps2);
+      report.reason = StopReason::max_iterations;
+      return propose(p);
+    }
+    ++report.iterations;
+    // Predicted decrease of the quadratic model: xi^T (mu xi - g) / 2,
+    // against the actual decrease over the terms valid at both poses.
+    double predicted = 0;
+    for (int i = 0; i < 6; ++i) predicted += xi[i] * (mu * xi[i] - n.g[i]);
+    predicted *= 0.5;
+    const double rho = detail::finite(at_target) && at_target.terms >= p.min_terms && predicted > 0
+                           ? (at_target.shared_reference_cost - at_target.shared_cost) / predicted
+                           : -1.0;
+    if (rho > 0) {
+      pose = next;
+      n = at_target;
+      step_limit = detail::step_norm_limit(pose.T, p.eps2);
+      ++report.accepted_steps;
+      const double a = 2 * rho - 1;
+      const double shrink = 1.0 - a * a * a;
+      mu *= shrink > 1.0 / 3.0 ? shrink : 1.0 / 3.0;
+      const double floor = p.min_damping * detail::max_diagonal(n);
+      mu = mu > floor ? mu : floor;
+      nu = p.nu;
+    } else {
+      mu *= nu;
+      nu *= 2;
+    }
+    return propose(p);
+  }
+
+ private:
+  /// The next candidate from the current pose, or the reason to stop.
+  EMF_HD bool propose(const LevenbergMarquardtParams& p) {
+    if (report.iterations >= p.max_iterations) return finish();
+    if (detail::max_abs(n.g, 6) <= p.eps1) return finish(StopReason::gradient_small);
+    if (p.converged_step > 0 && solve_damped(n, p.min_damping * detail::max_diagonal(n), xi) &&
+        norm(xi) <= p.converged_step)
+      return finish(StopReason::step_small);
+    if (!solve_damped(n, mu, xi)) return finish(StopReason::singular);
+    if (norm(xi) <= step_limit || !pose.step(xi, next))
+      return finish(StopReason::step_small);
+    return true;
+  }
+  EMF_HD bool finish() {
+    done = true;
+    report.final_cost = n.cost;
+    report.terms = n.terms;
+    return false;
+  }
+  EMF_HD bool finish(StopReason reason) {
+    report.reason = reason;
+    return finish();
+  }
+};
+
 /// Minimises the problem behind `linearize` starting at T; returns the pose.
 template <class S, class F>
   requires Linearizer<F, S>
 SE3<S> levenberg_marquardt(F&& linearize, const SE3<S>& start, const LevenbergMarquardtParams& p = {},
                            SolveReport* report_out = nullptr) {
-  SolveReport report;
-  auto pose = detail::SolverPose<S>::at(start);
-  NormalEquations6 n = linearize(pose.T_s, static_cast<const SE3<S>*>(nullptr));
-  if (detail::start(n, p.min_terms, report)) {
-    double mu = p.tau * detail::max_diagonal(n);
-    double nu = p.nu;
-    report.reason = StopReason::max_iterations;
-    while (report.iterations < p.max_iterations) {
-      if (detail::max_abs(n.g, 6) <= p.eps1) {
-        report.reason = StopReason::gradient_small;
-        break;
-      }
-      Vec6<double> xi;
-      if (p.converged_step > 0 && solve_damped(n, p.min_damping * detail::max_diagonal(n), xi) &&
-          norm(xi) <= p.converged_step) {
-        report.reason = StopReason::step_small;
-        break;
-      }
-      if (!solve_damped(n, mu, xi)) {
-        report.reason = StopReason::singular;
-        break;
-      }
-      detail::SolverPose<S> next;
-      if (norm(xi) <= detail::step_norm_limit(pose.T, p.eps2) || !pose.step(xi, next)) {
-        report.reason = StopReason::step_small;
-        break;
-      }
-      const NormalEquations6 n_new = linearize(next.T_s, &pose.T_s);
-      ++report.iterations;
-      // Predicted decrease of the quadratic model: xi^T (mu xi - g) / 2,
-      // against the actual decrease over the terms valid at both poses.
-      double predicted = 0;
-      for (int i = 0; i < 6; ++i) predicted += xi[i] * (mu * xi[i] - n.g[i]);
-      predicted *= 0.5;
-      const double rho = detail::finite(n_new) && n_new.terms >= p.min_terms && predicted > 0
-                             ? (n_new.shared_reference_cost - n_new.shared_cost) / predicted
-                             : -1.0;
-      if (rho > 0) {
-        pose = next;
-        n = n_new;
-        ++report.accepted_steps;
-        const double a = 2 * rho - 1;
-        mu *= std::max(1.0 / 3.0, 1.0 - a * a * a);
-        mu = std::max(mu, p.min_damping * detail::max_diagonal(n));
-        nu = p.nu;
-      } else {
-        mu *= nu;
-        nu *= 2;
-      }
-    }
+  auto it = LevenbergMarquardtIteration<S>::at(start);
+  while (it.advance(p, linearize(it.target(), it.reference()))) {
   }
-  report.final_cost = n.cost;
-  report.terms = n.terms;
-  if (report_out) *report_out = report;
-  return pose.T_s;
+  if (report_out) *report_out = it.report;
+  return it.pose.T_s;
 }
 
 /// Plain Gauss-Newton: every step accepted; stops on a small step.

@@ -1,0 +1,145 @@
+// Batched solves (solve/batched_solve.hpp): several SDF alignments solved in
+// lock step must end where each solved alone ends, one that has nothing to
+// solve must stop without holding up the others, and a batch's
+// linearisation must equal the single one.
+#include <cmath>
+#include <vector>
+
+#include "emfusion/solve/batched_solve.hpp"
+#include "emfusion/solve/sdf_alignment.hpp"
+#include "support/catch.hpp"
+#include "support/configs.hpp"
+#include "support/room.hpp"
+
+using namespace emfusion;
+using emfusion::test::Approx;
+
+namespace {
+
+template <class S>
+double translation_between(const SE3<S>& a, const SE3<S>& b) {
+  return norm((a.inverse() * b).template cast<double>().translation());
+}
+template <class S>
+double degrees_between(const SE3<S>& a, const SE3<S>& b) {
+  return norm(so3_log((a.inverse() * b).template cast<double>().rotation())) * 180.0 / M_PI;
+}
+
+}  // namespace
+
+TEMPLATE_LIST_TEST_CASE("A batch of alignments ends where each alone ends", "[solve]", emfusion::test::AllConfigs) {
+  using S = typename TestType::Scalar;
+  using B = typename TestType::Backend;
+  const test::RoomAtKnownPose<S, B> room;
+  const auto& volume = room.volume;
+  const auto& points = room.points;
+  const SE3<S>& truth = room.truth;
+  const HuberNorm<S>& huber = room.huber;
+  const auto* none = static_cast<const Image<S, B>*>(nullptr);
+  using Terms = sdf_alignment_terms_t<S, TsdfVolume<S, B>>;
+  const Terms all = make_sdf_alignment(volume, points, none, SdfAlignmentParams<S>{});
+  Terms corner = all;  // a quarter of the image: fewer terms, other iterations
+  corner.box = PixelBox{0, 0, points.width() / 2, points.height() / 2};
+  Terms strided = all;
+  strided.stride = 3;
+  Terms nothing = all;  // one pixel: too few terms, stops at once
+  nothing.box = PixelBox{0, 0, 1, 1};
+
+  const SE3<S> T_true = volume.pose().inverse() * truth;
+  const S deg = S(M_PI / 180);
+  const std::vector<Vec6<S>> offsets = {
+      Vec6<S>{{S(0.05), S(-0.05), S(0.06), S(4) * deg, S(-5) * deg, S(6) * deg}},
+      Vec6<S>{{S(0.02), S(0), S(0), S(0), S(0), S(0)}},
+      Vec6<S>{{S(0), S(0), S(0), S(0), S(10) * deg, S(0)}},
+      Vec6<S>{{S(-0.07), S(0.03), S(-0.07), S(-6) * deg, S(6) * deg, S(-5) * deg}},
+  };
+  std::vector<BatchedProblem<Terms, HuberNorm<S>>> problems = {
+      {all, huber}, {corner, huber}, {strided, huber}, {nothing, huber}};
+  std::vector<SE3<S>> starts;
+  for (const auto& o : offsets) starts.push_back(SE3<S>::exp(o) * T_true);
+
+  LevenbergMarquardtParams lm;
+  lm.tau = 1e-3;
+  lm.eps2 = 1e-6;
+  const B& backend = volume.backend();
+  BatchedSolveWorkspace<S, B> ws;
+  for (const int every : {1, 3}) {  // the host looking after every pass, or every third
+    ws.checks_every = every;
+    std::vector<SolveReport> reports;
+    const std::vector<SE3<S>> batched = solve_batch(backend, problems, starts, lm, reports, ws);
+    REQUIRE(batched.size() == problems.size());
+    REQUIRE(reports.size() == problems.size());
+    for (std::size_t p = 0; p < problems.size(); ++p) {
+      LinearizationCache<S, B> cache;
+      SolveReport alone_report;
+      const auto lin = [&](const SE3<S>& T, const SE3<S>* reference) {
+        return linearize(backend, problems[p].terms, huber, T, reference, cache);
+      };
+      const SE3<S> alone = levenberg_marquardt(lin, starts[p], lm, &alone_report);
+      INFO("problem " << p << ", host looking every " << every << ": batched " << reports[p].iterations
+                      << " iterations (" << to_string(reports[p].reason) << "), alone " << alone_report.iterations
+                      << " (" << to_string(alone_report.reason) << "); "
+                      << translation_between(batched[p], alone) * 1000 << " mm apart");
+      CHECK(reports[p].reason == alone_report.reason);
+      CHECK(reports[p].converged() == alone_report.converged());
+      CHECK(reports[p].terms == alone_report.terms);
+      CHECK(translation_between(batched[p], alone) < 2e-4);
+      CHECK(degrees_between(batched[p], alone) < 0.02);
+      if (p < 3) {  // and all three where they should be
+        CHECK(translation_between(batched[p], T_true) < 3e-3);
+        CHECK(std::abs(reports[p].iterations - alone_report.iterations) <= 3);
+      }
+    }
+    CHECK(reports[3].reason == StopReason::too_few_terms);
+    CHECK(reports[3].iterations == 0);
+    CHECK(max_abs_diff(batched[3].matrix(), starts[3].orthonormalized().matrix()) < S(1e-5));
+  }
+
+  // A batch of none is no work.
+  std::vector<SolveReport> reports;
+  CHECK(solve_batch(backend, decltype(problems){}, std::vector<SE3<S>>{}, lm, reports, ws).empty());
+  CHECK(reports.empty());
+  CHECK_THROWS_WITH(solve_batch(backend, problems, std::vector<SE3<S>>(1), lm, reports, ws),
+                    EMF_CONTAINS("need one start per problem"));
+}
+
+TEMPLATE_LIST_TEST_CASE("A batch's linearisation equals each problem's", "[solve]", emfusion::test::AllConfigs) {
+  using S = typename TestType::Scalar;
+  using B = typename TestType::Backend;
+  const test::RoomAtKnownPose<S, B> room;
+  const auto& volume = room.volume;
+  const auto& points = room.points;
+  const SE3<S>& truth = room.truth;
+  const HuberNorm<S>& huber = room.huber;
+  using Terms = sdf_alignment_terms_t<S, TsdfVolume<S, B>>;
+  const Terms all = make_sdf_alignment(volume, points, static_cast<const Image<S, B>*>(nullptr));
+  Terms strided = all;
+  strided.stride = 2;
+  const SE3<S> T_true = volume.pose().inverse() * truth;
+  const SE3<S> off = SE3<S>::exp(Vec6<S>{{S(0.01), S(0), S(-0.02), S(0), S(0.02), S(0)}}) * T_true;
+  std::vector<BatchedProblem<Terms, HuberNorm<S>>> problems = {{all, huber}, {strided, huber}, {all, huber}};
+  std::vector<LinearizationRequest<S>> requests(3);
+  requests[0].T = off, requests[0].reference = T_true, requests[0].has_reference = 1;
+  requests[1].T = T_true;
+  requests[2].T = T_true, requests[2].reference = off, requests[2].has_reference = 1;
+  for (auto& q : requests) q.active = 1;
+  BatchedSolveWorkspace<S, B> ws;
+  const std::vector<NormalEquations6> batch = linearize_batch(volume.backend(), problems, requests, ws);
+  REQUIRE(batch.size() == 3);
+  for (std::size_t p = 0; p < 3; ++p) {
+    const auto& q = requests[p];
+    const NormalEquations6 one =
+        linearize(volume.backend(), problems[p].terms, huber, q.T, q.has_reference ? &q.reference : nullptr);
+    INFO("problem " << p);
+    CHECK(batch[p].terms == one.terms);
+    CHECK(batch[p].terms > 1000);
+    CHECK(batch[p].cost == Approx(one.cost).epsilon(1e-9));
+    CHECK(batch[p].shared_cost == Approx(one.shared_cost).epsilon(1e-9));
+    CHECK(batch[p].shared_reference_cost == Approx(one.shared_reference_cost).epsilon(1e-9));
+    for (int i = 0; i < 6; ++i) CHECK(batch[p].g[i] == Approx(one.g[i]).epsilon(1e-9).margin(1e-12));
+    for (int i = 0; i < 21; ++i) CHECK(batch[p].H[i] == Approx(one.H[i]).epsilon(1e-9).margin(1e-12));
+  }
+  requests.pop_back();
+  CHECK_THROWS_WITH(linearize_batch(volume.backend(), problems, requests, ws),
+                    EMF_CONTAINS("need one request per problem"));
+}
