@@ -10,6 +10,7 @@
 #include <cmath>
 #include <cstdint>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "emfusion/sim/primitives.hpp"
@@ -68,6 +69,16 @@ double mean_where(const std::vector<S>& values, const std::vector<int>& labels, 
     if (labels[i] == label) sum += double(values[i]), ++n;
   return n > 0 ? sum / n : -1.0;
 }
+
+/// The library's Levenberg-Marquardt behind a type of its own: a user's
+/// solver, which tracking runs one problem at a time.
+struct LevenbergMarquardtOneByOne {
+  LevenbergMarquardt lm;
+  template <class F, class S>
+  SE3<S> solve(F&& linearize, const SE3<S>& start, SolveReport* report = nullptr) const {
+    return lm.solve(std::forward<F>(linearize), start, report);
+  }
+};
 
 /// A map that fused the first view and holds an object made from the box's
 /// mask, as the stages leave it after one frame.
@@ -183,6 +194,20 @@ TEMPLATE_LIST_TEST_CASE("Stages alone: the E-step at known poses, one tracking s
   REQUIRE(tracks.size() == 1);
   CHECK(tracks[0].outcome == TrackingOutcome::tracked);
   CHECK(double(norm(m.map.objects[0]->pose().translation() - before.translation())) < 0.01);
+
+  // The library's solver runs batched (solved_in_batches), any other one
+  // problem at a time: the same solver behind another type ends at the
+  // same pose, with the same stop.
+  static_assert(solved_in_batches<LevenbergMarquardt> && !solved_in_batches<LevenbergMarquardtOneByOne>);
+  const SE3<S> batched = m.map.objects[0]->pose();
+  m.map.objects[0]->set_pose(before);
+  const std::vector<PoseTrack> one_by_one =
+      track_objects(m.map, m.frame, m.s.params, HuberNorm<S>{S(2)}, LevenbergMarquardtOneByOne{});
+  REQUIRE(one_by_one.size() == 1);
+  CHECK(one_by_one[0].outcome == TrackingOutcome::tracked);
+  CHECK(one_by_one[0].report.reason == tracks[0].report.reason);
+  CHECK(one_by_one[0].report.terms == tracks[0].report.terms);
+  CHECK(double(norm(m.map.objects[0]->pose().translation() - batched.translation())) < 1e-4);
 }
 
 TEMPLATE_LIST_TEST_CASE("Stages alone: resizing from a detection, deletion by the existence rule", "[slam]",
@@ -636,6 +661,29 @@ TEMPLATE_LIST_TEST_CASE("Stages alone: tracking from a motion prediction, the re
     CHECK(t.attempts == (retry ? 2 : 1));
     CHECK(t.from_prediction == !retry);
     CHECK(t.outcome == (retry ? TrackingOutcome::tracked : TrackingOutcome::solve_failed));
+  }
+  // The same through the batched path, beside a problem without a
+  // prediction (nothing to retry from): only the first is solved again.
+  for (const bool retry : {false, true}) {
+    std::vector<PoseTrack> tracks;
+    BatchedSolveWorkspace<S, B> batch;
+    m.map.background.visit([&](const auto& volume) {
+      const auto terms = sdf_alignment_in_box(volume, m.frame.points, &m.frame.associations.image(0), align,
+                                              m.map.background.backend());
+      const PoseStarts<S> previous_only{in_volume.previous, std::nullopt};
+      track_in_volumes(m.map.background.backend(), std::vector{terms, terms},
+                       std::vector{norm_in_voxels, norm_in_voxels}, std::vector{in_volume, previous_only}, align,
+                       LevenbergMarquardt{}, retry,
+                       [&](std::size_t, const SE3<S>& T, PoseTrack& t) { fail_from_prediction(T, t); }, tracks,
+                       batch);
+    });
+    REQUIRE(tracks.size() == 2);
+    CHECK(tracks[0].attempts == (retry ? 2 : 1));
+    CHECK(tracks[0].from_prediction == !retry);
+    CHECK(tracks[0].outcome == (retry ? TrackingOutcome::tracked : TrackingOutcome::solve_failed));
+    CHECK(tracks[1].attempts == 1);
+    CHECK_FALSE(tracks[1].from_prediction);
+    CHECK(tracks[1].outcome == TrackingOutcome::tracked);
   }
 
   // Objects are predicted only from poses of the two frames before.

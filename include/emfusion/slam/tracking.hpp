@@ -10,13 +10,16 @@
 // converged with enough terms and moved less than the per-frame bound
 // (docs/system.md, "Hostile input"); otherwise it is solved once more from
 // the other start (retry_tracking), and failing that the last pose stays
-// and the outcome says why.
+// and the outcome says why. With the library's Levenberg-Marquardt the
+// solves run in batches (solve/batched_solve.hpp): all objects' iterations
+// together, the camera's without a host round trip per iteration.
 #pragma once
 
 #include <cmath>
 #include <cstddef>
 #include <future>
 #include <optional>
+#include <utility>
 #include <vector>
 
 #include "emfusion/core/parallel.hpp"
@@ -38,10 +41,19 @@ namespace emfusion {
 /// allocates its own.
 template <class S, Backend B>
 struct TrackingWorkspace {
-  LinearizationCache<S, B> camera_cache;
-  std::vector<LinearizationCache<S, B>> object_caches;  ///< one per object solve (they may run at once)
+  BatchedSolveWorkspace<S, B> camera_batch, object_batch;  ///< solved_in_batches
+  LinearizationCache<S, B> camera_cache;                   ///< the other solvers'
+  std::vector<LinearizationCache<S, B>> object_caches;     ///< one per object solve (they may run at once)
   ConcurrentLanes<B> lanes;
 };
+
+/// Whether tracking solves with `Solver` in batches (solve/batched_solve.hpp):
+/// the library's LevenbergMarquardt, whose iterations run for all objects at
+/// once and, on a GPU, without the host. Any other solver (GaussNewton, a
+/// user's PoseSolver) sees one problem at a time through its Linearizer
+/// (track_in_volume): the same results, one solve after another.
+template <class Solver>
+inline constexpr bool solved_in_batches = std::same_as<Solver, LevenbergMarquardt>;
 
 /// How far `to` lies from `from`: translation and rotation angle.
 template <class S>
@@ -148,6 +160,80 @@ SE3<S> track_in_volume(const Volume& volume, const Image<Vec3<S>, B>& points, co
   return T;
 }
 
+/// track_in_volume for problems k = 0..n-1 at once (solved_in_batches):
+/// terms[k] with norms[k] from starts[k], `judge(k, T, track)` judging each
+/// solve. The starts are chosen from one batch of linearisations at the
+/// coarsest level (agrees_at_least_as_well), the solves run as one
+/// solve_coarse_to_fine_batch, and with `retry` the problems not `tracked`
+/// that have a second start as another. Returns each problem's pose as
+/// track_in_volume does and fills `tracks`.
+template <class S, Backend B, class Volume, class Norm, class Judge>
+  requires RobustNorm<Norm, S>
+std::vector<SE3<S>> track_in_volumes(const B& backend, const std::vector<SdfAlignmentTerms<S, Volume>>& terms,
+                                     const std::vector<Norm>& norms, const std::vector<PoseStarts<S>>& starts,
+                                     const SdfAlignmentParams<S>& align, const LevenbergMarquardt& solver, bool retry,
+                                     Judge&& judge, std::vector<PoseTrack>& tracks, BatchedSolveWorkspace<S, B>& ws) {
+  using Terms = SdfAlignmentTerms<S, Volume>;
+  const std::size_t n = terms.size();
+  std::vector<char> predicted_first(n, 0);
+  std::vector<BatchedProblem<Terms, Norm>> checks;
+  std::vector<LinearizationRequest<S>> requests;
+  for (std::size_t k = 0; k < n; ++k) {
+    if (!starts[k].predicted) continue;
+    const Terms coarse = at_level(terms[k], align, align.pyramid_levels - 1);
+    checks.push_back({coarse, norms[k]}), checks.push_back({coarse, norms[k]});
+    LinearizationRequest<S> at_prediction, at_previous;
+    at_prediction.T = *starts[k].predicted, at_prediction.reference = starts[k].previous;
+    at_prediction.has_reference = at_prediction.active = 1;
+    at_previous.T = at_previous.reference = starts[k].previous;
+    at_previous.active = 1;
+    requests.push_back(at_prediction), requests.push_back(at_previous);
+  }
+  if (!checks.empty()) {
+    const std::vector<NormalEquations6> sums = linearize_batch(backend, checks, requests, ws);
+    for (std::size_t k = 0, c = 0; k < n; ++k)
+      if (starts[k].predicted) predicted_first[k] = agrees_at_least_as_well(sums[c], sums[c + 1]), c += 2;
+  }
+  // Solves problems `which`, each from its prediction where from_prediction(k).
+  const auto solve = [&](const std::vector<std::size_t>& which, auto&& from_prediction, std::vector<PoseTrack>& t,
+                         std::vector<SE3<S>>& T) {
+    std::vector<Terms> some_terms;
+    std::vector<Norm> some_norms;
+    std::vector<SE3<S>> from;
+    for (const std::size_t k : which) {
+      t[k].from_prediction = from_prediction(k);
+      some_terms.push_back(terms[k]), some_norms.push_back(norms[k]);
+      from.push_back(t[k].from_prediction ? *starts[k].predicted : starts[k].previous);
+    }
+    std::vector<SolveReport> reports;
+    const std::vector<SE3<S>> solved =
+        solve_coarse_to_fine_batch(backend, some_terms, some_norms, align, solver, from, reports, ws);
+    for (std::size_t i = 0; i < which.size(); ++i) {
+      const std::size_t k = which[i];
+      t[k].report = reports[i], T[k] = solved[i];
+      judge(k, T[k], t[k]);
+    }
+  };
+  std::vector<std::size_t> all(n);
+  for (std::size_t k = 0; k < n; ++k) all[k] = k;
+  tracks.assign(n, PoseTrack{});
+  std::vector<SE3<S>> T(n);
+  solve(all, [&](std::size_t k) { return predicted_first[k] != 0; }, tracks, T);
+  for (PoseTrack& t : tracks) t.attempts = 1;
+  std::vector<std::size_t> again;
+  for (std::size_t k = 0; k < n; ++k)
+    if (retry && starts[k].predicted && tracks[k].outcome != TrackingOutcome::tracked) again.push_back(k);
+  if (again.empty()) return T;
+  std::vector<PoseTrack> second(n);
+  std::vector<SE3<S>> T_second(n);
+  solve(again, [&](std::size_t k) { return predicted_first[k] == 0; }, second, T_second);
+  for (const std::size_t k : again) {
+    if (second[k].outcome == TrackingOutcome::tracked) T[k] = T_second[k], tracks[k] = second[k];
+    tracks[k].attempts = 2;
+  }
+  return T;
+}
+
 /// Moves map.T_world_camera to its constant-velocity prediction at
 /// `timestamp` (when SystemParams::predict_motion is on and the last two
 /// frames have poses), so that the E-step associates the frame there;
@@ -209,14 +295,27 @@ PoseTrack track_camera(Map<S, B>& map, const Frame<S, B>& frame, const SystemPar
     t.outcome = tracking_outcome(t.report, double(params.min_camera_terms), T, t.step, params.max_camera_motion);
   };
   PoseTrack t;
-  LinearizationCache<S, B> local;
+  TrackingWorkspace<S, B> local;
+  TrackingWorkspace<S, B>& ws = workspace ? *workspace : local;
+  const auto align = camera_alignment_params(params, frame.points.width(), frame.points.height());
   const SE3<S> T_volume_camera = map.background.visit([&](const auto& background) {
-    return track_in_volume(background, frame.points, &frame.associations.image(0), in_volume,
-                           scaled_norm(norm, background.voxel_size()),
-                           camera_alignment_params(params, frame.points.width(), frame.points.height()),
-                           camera_solver(solver, params),
-                           params.retry_tracking, judge, t, workspace ? workspace->camera_cache : local,
-                           background.backend());
+    const auto background_norm = scaled_norm(norm, background.voxel_size());
+    if constexpr (solved_in_batches<Solver>) {
+      std::vector<PoseTrack> tracks;
+      const auto terms = sdf_alignment_in_box(background, frame.points, &frame.associations.image(0), align,
+                                              background.backend());
+      const SE3<S> T = track_in_volumes(background.backend(), std::vector{terms}, std::vector{background_norm},
+                                        std::vector{in_volume}, align, camera_solver(solver, params),
+                                        params.retry_tracking,
+                                        [&](std::size_t, const SE3<S>& T_vc, PoseTrack& tr) { judge(T_vc, tr); },
+                                        tracks, ws.camera_batch)[0];
+      t = tracks[0];
+      return T;
+    } else {
+      return track_in_volume(background, frame.points, &frame.associations.image(0), in_volume, background_norm,
+                             align, camera_solver(solver, params), params.retry_tracking, judge, t, ws.camera_cache,
+                             background.backend());
+    }
   });
   map.T_world_camera = t.outcome == TrackingOutcome::tracked ? T_world_volume * T_volume_camera : from.previous;
   return t;
@@ -227,10 +326,11 @@ PoseTrack track_camera(Map<S, B>& map, const Frame<S, B>& frame, const SystemPar
 /// (predict_objects; without them, from the objects' poses); sets each
 /// object's pose to the solved one when its outcome is `tracked`, else puts
 /// back its previous pose (restore_pose). Returns one PoseTrack per object, in Map::objects
-/// order. `norm` is in voxels of each object. Each solve is independent of
-/// the others': on CUDA they run from host threads on streams of their own,
-/// so that their small kernels and the host's solver steps overlap; the
-/// poses are applied afterwards in object order.
+/// order. `norm` is in voxels of each object. With the library's
+/// LevenbergMarquardt the objects are solved as one batch (track_in_volumes:
+/// each iteration one pass over all their terms, and on CUDA no host in the
+/// loop); with any other solver one after another, on CUDA from host threads
+/// on streams of their own. The poses are applied afterwards in object order.
 template <class S, Backend B, class Norm, class Solver>
   requires RobustNorm<Norm, S> && PoseSolver<Solver, S>
 std::vector<PoseTrack> track_objects(Map<S, B>& map, const Frame<S, B>& frame, const SystemParams<S>& params,
@@ -241,42 +341,67 @@ std::vector<PoseTrack> track_objects(Map<S, B>& map, const Frame<S, B>& frame, c
   detail::require(!starts || starts->size() == n, "track_objects", "need one PoseStarts per live object");
   TrackingWorkspace<S, B> local;
   TrackingWorkspace<S, B>& ws = workspace ? *workspace : local;
-  ws.object_caches.resize(n);
   const SdfAlignmentParams<S> align = alignment_params(params, params.object_integration.max_weight);
   const B& backend = frame.points.backend();
   std::vector<PoseTrack> tracks(n);
   std::vector<SE3<S>> T_world_object(n);
-  const auto solve = [&](std::size_t k, const B& run_on) {
-    const ObjectModel<S, B>& o = *map.objects[k];
-    const PoseStarts<S> from = starts ? (*starts)[k] : PoseStarts<S>{o.pose(), std::nullopt};
-    // The solver finds the camera in the object's volume: T_volume_camera
-    // of a world pose T_world_object.
-    const SE3<S> T_object_volume = o.T_object_volume();
-    const auto in_volume = [&](const SE3<S>& T_wo) { return (T_wo * T_object_volume).inverse() * map.T_world_camera; };
-    const auto to_world = [&](const SE3<S>& T_vc) {
-      return map.T_world_camera * T_vc.inverse() * T_object_volume.inverse();
-    };
-    PoseStarts<S> volume_starts{in_volume(from.previous), std::nullopt};
-    if (from.predicted) volume_starts.predicted = in_volume(*from.predicted);
-    const auto judge = [&](const SE3<S>& T_volume_camera, PoseTrack& t) {
-      const SE3<S> T = to_world(T_volume_camera);
-      t.step = step_between(from.previous, T);
-      t.outcome = tracking_outcome(t.report, double(params.min_object_terms), T, t.step, params.max_object_motion);
-    };
-    const SE3<S> T_volume_camera =
-        track_in_volume(o.volume(), frame.points, &frame.associations.image(int(k) + 1), volume_starts,
-                        scaled_norm(norm, o.volume().voxel_size()), align, solver, params.retry_tracking, judge,
-                        tracks[k], ws.object_caches[k], run_on);
-    if (tracks[k].outcome == TrackingOutcome::tracked) T_world_object[k] = to_world(T_volume_camera);
+  // The solver finds the camera in each object's volume: T_volume_camera of
+  // a world pose T_world_object, and back.
+  const auto in_volume = [&](std::size_t k, const SE3<S>& T_wo) {
+    return (T_wo * map.objects[k]->T_object_volume()).inverse() * map.T_world_camera;
   };
-  if (ConcurrentLanes<B>::concurrent && n > 1) {
-    std::vector<B> lanes;
-    for (std::size_t k = 0; k < n; ++k) lanes.push_back(ws.lanes.lane(k, backend));
-    std::vector<std::future<void>> running;
-    for (std::size_t k = 0; k < n; ++k) running.push_back(std::async(std::launch::async, solve, k, lanes[k]));
-    for (auto& r : running) r.get();  // rethrows a solve's exception here
+  const auto to_world = [&](std::size_t k, const SE3<S>& T_vc) {
+    return map.T_world_camera * T_vc.inverse() * map.objects[k]->T_object_volume().inverse();
+  };
+  const auto volume_starts = [&](std::size_t k) {
+    const PoseStarts<S> from = starts ? (*starts)[k] : PoseStarts<S>{map.objects[k]->pose(), std::nullopt};
+    PoseStarts<S> in{in_volume(k, from.previous), std::nullopt};
+    if (from.predicted) in.predicted = in_volume(k, *from.predicted);
+    return std::pair{from, in};
+  };
+  const auto judge = [&](std::size_t k, const PoseStarts<S>& from, const SE3<S>& T_volume_camera, PoseTrack& t) {
+    const SE3<S> T = to_world(k, T_volume_camera);
+    t.step = step_between(from.previous, T);
+    t.outcome = tracking_outcome(t.report, double(params.min_object_terms), T, t.step, params.max_object_motion);
+  };
+  if constexpr (solved_in_batches<Solver>) {
+    using Terms = sdf_alignment_terms_t<S, TsdfVolume<S, B>>;
+    std::vector<Terms> terms;
+    std::vector<decltype(scaled_norm(norm, S(1)))> norms;
+    std::vector<PoseStarts<S>> from, in;
+    for (std::size_t k = 0; k < n; ++k) {
+      const TsdfVolume<S, B>& volume = map.objects[k]->volume();
+      terms.push_back(sdf_alignment_in_box(volume, frame.points, &frame.associations.image(int(k) + 1), align,
+                                           backend));
+      norms.push_back(scaled_norm(norm, volume.voxel_size()));
+      const auto [world, volume_frame] = volume_starts(k);
+      from.push_back(world), in.push_back(volume_frame);
+    }
+    const std::vector<SE3<S>> T_volume_camera = track_in_volumes(
+        backend, terms, norms, in, align, solver, params.retry_tracking,
+        [&](std::size_t k, const SE3<S>& T_vc, PoseTrack& t) { judge(k, from[k], T_vc, t); }, tracks, ws.object_batch);
+    for (std::size_t k = 0; k < n; ++k)
+      if (tracks[k].outcome == TrackingOutcome::tracked) T_world_object[k] = to_world(k, T_volume_camera[k]);
   } else {
-    for (std::size_t k = 0; k < n; ++k) solve(k, backend);
+    ws.object_caches.resize(n);
+    const auto solve = [&](std::size_t k, const B& run_on) {
+      const auto [from, in] = volume_starts(k);
+      const ObjectModel<S, B>& o = *map.objects[k];
+      const SE3<S> T_volume_camera = track_in_volume(
+          o.volume(), frame.points, &frame.associations.image(int(k) + 1), in,
+          scaled_norm(norm, o.volume().voxel_size()), align, solver, params.retry_tracking,
+          [&](const SE3<S>& T_vc, PoseTrack& t) { judge(k, from, T_vc, t); }, tracks[k], ws.object_caches[k], run_on);
+      if (tracks[k].outcome == TrackingOutcome::tracked) T_world_object[k] = to_world(k, T_volume_camera);
+    };
+    if (ConcurrentLanes<B>::concurrent && n > 1) {
+      std::vector<B> lanes;
+      for (std::size_t k = 0; k < n; ++k) lanes.push_back(ws.lanes.lane(k, backend));
+      std::vector<std::future<void>> running;
+      for (std::size_t k = 0; k < n; ++k) running.push_back(std::async(std::launch::async, solve, k, lanes[k]));
+      for (auto& r : running) r.get();  // rethrows a solve's exception here
+    } else {
+      for (std::size_t k = 0; k < n; ++k) solve(k, backend);
+    }
   }
   for (std::size_t k = 0; k < n; ++k) {
     ObjectModel<S, B>& o = *map.objects[k];
