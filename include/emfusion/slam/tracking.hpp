@@ -374,8 +374,8 @@ std::vector<PoseTrack> track_objects(Map<S, B>& map, const Frame<S, B>& frame, c
       terms.push_back(sdf_alignment_in_box(volume, frame.points, &frame.associations.image(int(k) + 1), align,
                                            backend));
       norms.push_back(scaled_norm(norm, volume.voxel_size()));
-      const auto [world, volume_frame] = volume_starts(k);
-      from.push_back(world), in.push_back(volume_frame);
+      const auto world_and_volume = volume_starts(k);
+      from.push_back(world_and_volume.first), in.push_back(world_and_volume.second);
     }
     const std::vector<SE3<S>> T_volume_camera = track_in_volumes(
         backend, terms, norms, in, align, solver, params.retry_tracking,
@@ -385,7 +385,10 @@ std::vector<PoseTrack> track_objects(Map<S, B>& map, const Frame<S, B>& frame, c
   } else {
     ws.object_caches.resize(n);
     const auto solve = [&](std::size_t k, const B& run_on) {
-      const auto [from, in] = volume_starts(k);
+      // Not a structured binding: clang before 16 does not let lambdas capture one.
+      const auto starts_k = volume_starts(k);
+      const PoseStarts<S>& from = starts_k.first;
+      const PoseStarts<S>& in = starts_k.second;
       const ObjectModel<S, B>& o = *map.objects[k];
       const SE3<S> T_volume_camera = track_in_volume(
           o.volume(), frame.points, &frame.associations.image(int(k) + 1), in,
