@@ -25,27 +25,29 @@ double degrees_between(const SE3<S>& a, const SE3<S>& b) {
   return norm(so3_log((a.inverse() * b).template cast<double>().rotation())) * 180.0 / M_PI;
 }
 
+/// The room at a known pose, its terms over the whole image, and that pose
+/// in the volume (what the solves should find).
+template <class S, class B>
+struct RoomTerms : test::RoomAtKnownPose<S, B> {
+  using Terms = sdf_alignment_terms_t<S, TsdfVolume<S, B>>;
+  Terms all = make_sdf_alignment(this->volume, this->points, static_cast<const Image<S, B>*>(nullptr));
+  SE3<S> T_true = this->volume.pose().inverse() * this->truth;
+};
+
 }  // namespace
 
 TEMPLATE_LIST_TEST_CASE("A batch of alignments ends where each alone ends", "[solve]", emfusion::test::AllConfigs) {
   using S = typename TestType::Scalar;
   using B = typename TestType::Backend;
-  const test::RoomAtKnownPose<S, B> room;
-  const auto& volume = room.volume;
-  const auto& points = room.points;
-  const SE3<S>& truth = room.truth;
-  const HuberNorm<S>& huber = room.huber;
-  const auto* none = static_cast<const Image<S, B>*>(nullptr);
-  using Terms = sdf_alignment_terms_t<S, TsdfVolume<S, B>>;
-  const Terms all = make_sdf_alignment(volume, points, none, SdfAlignmentParams<S>{});
-  Terms corner = all;  // a quarter of the image: fewer terms, other iterations
-  corner.box = PixelBox{0, 0, points.width() / 2, points.height() / 2};
-  Terms strided = all;
+  const RoomTerms<S, B> room;
+  using Terms = typename RoomTerms<S, B>::Terms;
+  Terms corner = room.all;  // a quarter of the image: fewer terms, other iterations
+  corner.box = PixelBox{0, 0, room.points.width() / 2, room.points.height() / 2};
+  Terms strided = room.all;
   strided.stride = 3;
-  Terms nothing = all;  // one pixel: too few terms, stops at once
+  Terms nothing = room.all;  // one pixel: too few terms, stops at once
   nothing.box = PixelBox{0, 0, 1, 1};
 
-  const SE3<S> T_true = volume.pose().inverse() * truth;
   const S deg = S(M_PI / 180);
   const std::vector<Vec6<S>> offsets = {
       Vec6<S>{{S(0.05), S(-0.05), S(0.06), S(4) * deg, S(-5) * deg, S(6) * deg}},
@@ -54,14 +56,14 @@ TEMPLATE_LIST_TEST_CASE("A batch of alignments ends where each alone ends", "[so
       Vec6<S>{{S(-0.07), S(0.03), S(-0.07), S(-6) * deg, S(6) * deg, S(-5) * deg}},
   };
   std::vector<BatchedProblem<Terms, HuberNorm<S>>> problems = {
-      {all, huber}, {corner, huber}, {strided, huber}, {nothing, huber}};
+      {room.all, room.huber}, {corner, room.huber}, {strided, room.huber}, {nothing, room.huber}};
   std::vector<SE3<S>> starts;
-  for (const auto& o : offsets) starts.push_back(SE3<S>::exp(o) * T_true);
+  for (const auto& o : offsets) starts.push_back(SE3<S>::exp(o) * room.T_true);
 
   LevenbergMarquardtParams lm;
   lm.tau = 1e-3;
   lm.eps2 = 1e-6;
-  const B& backend = volume.backend();
+  const B& backend = room.volume.backend();
   BatchedSolveWorkspace<S, B> ws;
   for (const int every : {1, 3}) {  // the host looking after every pass, or every third
     ws.checks_every = every;
@@ -73,7 +75,7 @@ TEMPLATE_LIST_TEST_CASE("A batch of alignments ends where each alone ends", "[so
       LinearizationCache<S, B> cache;
       SolveReport alone_report;
       const auto lin = [&](const SE3<S>& T, const SE3<S>* reference) {
-        return linearize(backend, problems[p].terms, huber, T, reference, cache);
+        return linearize(backend, problems[p].terms, room.huber, T, reference, cache);
       };
       const SE3<S> alone = levenberg_marquardt(lin, starts[p], lm, &alone_report);
       INFO("problem " << p << ", host looking every " << every << ": batched " << reports[p].iterations
@@ -86,7 +88,7 @@ TEMPLATE_LIST_TEST_CASE("A batch of alignments ends where each alone ends", "[so
       CHECK(translation_between(batched[p], alone) < 2e-4);
       CHECK(degrees_between(batched[p], alone) < 0.02);
       if (p < 3) {  // and all three where they should be
-        CHECK(translation_between(batched[p], T_true) < 3e-3);
+        CHECK(translation_between(batched[p], room.T_true) < 3e-3);
         CHECK(std::abs(reports[p].iterations - alone_report.iterations) <= 3);
       }
     }
@@ -106,30 +108,26 @@ TEMPLATE_LIST_TEST_CASE("A batch of alignments ends where each alone ends", "[so
 TEMPLATE_LIST_TEST_CASE("A batch's linearisation equals each problem's", "[solve]", emfusion::test::AllConfigs) {
   using S = typename TestType::Scalar;
   using B = typename TestType::Backend;
-  const test::RoomAtKnownPose<S, B> room;
-  const auto& volume = room.volume;
-  const auto& points = room.points;
-  const SE3<S>& truth = room.truth;
-  const HuberNorm<S>& huber = room.huber;
-  using Terms = sdf_alignment_terms_t<S, TsdfVolume<S, B>>;
-  const Terms all = make_sdf_alignment(volume, points, static_cast<const Image<S, B>*>(nullptr));
-  Terms strided = all;
+  const RoomTerms<S, B> room;
+  using Terms = typename RoomTerms<S, B>::Terms;
+  Terms strided = room.all;
   strided.stride = 2;
-  const SE3<S> T_true = volume.pose().inverse() * truth;
-  const SE3<S> off = SE3<S>::exp(Vec6<S>{{S(0.01), S(0), S(-0.02), S(0), S(0.02), S(0)}}) * T_true;
-  std::vector<BatchedProblem<Terms, HuberNorm<S>>> problems = {{all, huber}, {strided, huber}, {all, huber}};
+  const SE3<S> off = SE3<S>::exp(Vec6<S>{{S(0.01), S(0), S(-0.02), S(0), S(0.02), S(0)}}) * room.T_true;
+  std::vector<BatchedProblem<Terms, HuberNorm<S>>> problems = {
+      {room.all, room.huber}, {strided, room.huber}, {room.all, room.huber}};
   std::vector<LinearizationRequest<S>> requests(3);
-  requests[0].T = off, requests[0].reference = T_true, requests[0].has_reference = 1;
-  requests[1].T = T_true;
-  requests[2].T = T_true, requests[2].reference = off, requests[2].has_reference = 1;
+  requests[0].T = off, requests[0].reference = room.T_true, requests[0].has_reference = 1;
+  requests[1].T = room.T_true;
+  requests[2].T = room.T_true, requests[2].reference = off, requests[2].has_reference = 1;
   for (auto& q : requests) q.active = 1;
   BatchedSolveWorkspace<S, B> ws;
-  const std::vector<NormalEquations6> batch = linearize_batch(volume.backend(), problems, requests, ws);
+  const std::vector<NormalEquations6> batch = linearize_batch(room.volume.backend(), problems, requests, ws);
   REQUIRE(batch.size() == 3);
   for (std::size_t p = 0; p < 3; ++p) {
     const auto& q = requests[p];
     const NormalEquations6 one =
-        linearize(volume.backend(), problems[p].terms, huber, q.T, q.has_reference ? &q.reference : nullptr);
+        linearize(room.volume.backend(), problems[p].terms, room.huber, q.T,
+                  q.has_reference ? &q.reference : nullptr);
     INFO("problem " << p);
     CHECK(batch[p].terms == one.terms);
     CHECK(batch[p].terms > 1000);
@@ -140,6 +138,6 @@ TEMPLATE_LIST_TEST_CASE("A batch's linearisation equals each problem's", "[solve
     for (int i = 0; i < 21; ++i) CHECK(batch[p].H[i] == Approx(one.H[i]).epsilon(1e-9).margin(1e-12));
   }
   requests.pop_back();
-  CHECK_THROWS_WITH(linearize_batch(volume.backend(), problems, requests, ws),
+  CHECK_THROWS_WITH(linearize_batch(room.volume.backend(), problems, requests, ws),
                     EMF_CONTAINS("need one request per problem"));
 }

@@ -20,7 +20,6 @@
 
 #include "emfusion/core/backend.hpp"
 
-
 namespace emfusion {
 
 /// The policy for a reduction on `backend`: its reduction_policy() where it

@@ -100,15 +100,17 @@ struct BatchedTerm {
     }
     return lo;
   }
+  /// Slot k of the problem whose terms start at `base`; null without one.
+  EMF_HD TermValue<S>* slot(int k, int base) const {
+    return values && k >= 0 ? values + k * total_terms + base : nullptr;
+  }
   EMF_HD void operator()(int g, NormalEquations6& acc) const {
     const int p = problem_of(g);
-    if (!requests[p].active) return;
     const LinearizationRequest<S>& q = requests[p];
+    if (!q.active) return;
     const int base = first_term[p];
-    TermValue<S>* store = values && q.write_slot >= 0 ? values + q.write_slot * total_terms + base : nullptr;
-    const TermValue<S>* stored = values && q.read_slot >= 0 ? values + q.read_slot * total_terms + base : nullptr;
-    add_term(problems[p].terms, problems[p].norm, q.T, q.has_reference ? &q.reference : nullptr, store, stored,
-             g - base, acc);
+    add_term(problems[p].terms, problems[p].norm, q.T, q.has_reference ? &q.reference : nullptr,
+             slot(q.write_slot, base), slot(q.read_slot, base), g - base, acc);
   }
   /// Terms [begin, end) of one problem (a segment on the CPU): the problem
   /// and its request looked up once, the loop that of a single
@@ -120,8 +122,7 @@ struct BatchedTerm {
     if (!q.active) return;
     const int base = first_term[p];
     LinearizeTerm<S, P, N> f{problems[p].terms, problems[p].norm, q.T, q.reference, q.has_reference != 0};
-    if (values && q.write_slot >= 0) f.store = values + q.write_slot * total_terms + base;
-    if (values && q.read_slot >= 0) f.stored_reference = values + q.read_slot * total_terms + base;
+    f.store = slot(q.write_slot, base), f.stored_reference = slot(q.read_slot, base);
     for (int g = begin; g < end; ++g) f(g - base, acc);
   }
 };

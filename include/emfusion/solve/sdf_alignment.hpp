@@ -11,6 +11,7 @@
 #pragma once
 
 #include <cmath>
+#include <utility>
 #include <vector>
 
 #include "emfusion/core/image.hpp"
@@ -237,25 +238,42 @@ SdfAlignmentTerms<S, Volume> at_level(SdfAlignmentTerms<S, Volume> terms, const 
   return terms;
 }
 
-/// The coarse-to-fine loop over `levels` levels: `solve_level(level, start,
-/// report)` solves one level from `start` and returns its pose; the finest
-/// (level 0) runs last, each level from where the coarser one stopped. A
-/// coarse level without a solution (too few terms at its spacing) hands on
-/// its start: the finer level decides. The report is the finest level's,
-/// with the iterations and accepted steps of all levels added up.
+/// The coarse-to-fine loop over `levels` levels for several problems at
+/// once: `solve_level(level, starts, reports)` solves every problem at one
+/// level, each from its start, fills one report each and returns the
+/// poses; the finest (level 0) runs last, each level from where the coarser
+/// one stopped. A coarse level without a solution for a problem (too few
+/// terms at its spacing) hands on its start: the finer level decides. Each
+/// report is its problem's finest level's, with the iterations and accepted
+/// steps of all levels added up.
+template <class S, class SolveLevel>
+std::vector<SE3<S>> coarse_to_fine_each(int levels, std::vector<SE3<S>> T, std::vector<SolveReport>& reports,
+                                        SolveLevel&& solve_level) {
+  const std::size_t n = T.size();
+  std::vector<int> iterations(n, 0), accepted(n, 0);
+  reports.assign(n, SolveReport{});
+  for (int level = levels - 1; level >= 0; --level) {
+    reports.assign(n, SolveReport{});
+    const std::vector<SE3<S>> solved = solve_level(level, std::as_const(T), reports);
+    for (std::size_t k = 0; k < n; ++k) {
+      iterations[k] += reports[k].iterations, accepted[k] += reports[k].accepted_steps;
+      if (level == 0 || reports[k].converged()) T[k] = solved[k];
+    }
+  }
+  for (std::size_t k = 0; k < n; ++k) reports[k].iterations = iterations[k], reports[k].accepted_steps = accepted[k];
+  return T;
+}
+
+/// coarse_to_fine_each for one problem: `solve_level(level, start, report)`
+/// solves one level from `start` and returns its pose.
 template <class S, class SolveLevel>
 SE3<S> coarse_to_fine(int levels, const SE3<S>& start, SolveReport* report, SolveLevel&& solve_level) {
-  SE3<S> T = start;
-  int iterations = 0, accepted = 0;
-  SolveReport level_report;
-  for (int level = levels - 1; level >= 0; --level) {
-    level_report = SolveReport{};
-    const SE3<S> solved = solve_level(level, T, level_report);
-    iterations += level_report.iterations, accepted += level_report.accepted_steps;
-    if (level == 0 || level_report.converged()) T = solved;
-  }
-  level_report.iterations = iterations, level_report.accepted_steps = accepted;
-  if (report) *report = level_report;
+  std::vector<SolveReport> reports;
+  const auto one_level = [&](int level, const std::vector<SE3<S>>& from, std::vector<SolveReport>& r) {
+    return std::vector<SE3<S>>{solve_level(level, from[0], r[0])};
+  };
+  const SE3<S> T = coarse_to_fine_each(levels, std::vector<SE3<S>>{start}, reports, one_level)[0];
+  if (report) *report = reports[0];
   return T;
 }
 
@@ -300,19 +318,13 @@ std::vector<SE3<S>> solve_coarse_to_fine_batch(const B& backend, const std::vect
   const std::size_t n = terms.size();
   detail::require(norms.size() == n && starts.size() == n, "solve_coarse_to_fine_batch",
                   "need one norm and one start per problem");
-  std::vector<int> iterations(n, 0), accepted(n, 0);
   std::vector<BatchedProblem<SdfAlignmentTerms<S, Volume>, Norm>> problems(n);
-  for (int level = params.pyramid_levels - 1; level >= 0; --level) {
+  const auto batch_level = [&](int level, const std::vector<SE3<S>>& from, std::vector<SolveReport>& r) {
     for (std::size_t k = 0; k < n; ++k) problems[k] = {at_level(terms[k], params, level), norms[k]};
     const LevenbergMarquardt level_solver = solver_at_level(solver, level, params.pyramid_levels);
-    const std::vector<SE3<S>> solved = solve_batch(backend, problems, starts, level_solver.params, reports, ws);
-    for (std::size_t k = 0; k < n; ++k) {
-      iterations[k] += reports[k].iterations, accepted[k] += reports[k].accepted_steps;
-      if (level == 0 || reports[k].converged()) starts[k] = solved[k];
-    }
-  }
-  for (std::size_t k = 0; k < n; ++k) reports[k].iterations = iterations[k], reports[k].accepted_steps = accepted[k];
-  return starts;
+    return solve_batch(backend, problems, from, level_solver.params, r, ws);
+  };
+  return coarse_to_fine_each(params.pyramid_levels, std::move(starts), reports, batch_level);
 }
 
 /// The rule of agrees_at_least_as_well below, from the linearisations at
