@@ -202,22 +202,35 @@ __global__ void __launch_bounds__(Threads)
   __syncthreads();
   if (!last) return;
   __threadfence();
-  // Lane q of component c sums segments first + q, + warps, ...; then the
-  // lanes in order.
+  // Lane q of component c sums segments first + q, + warps, ..., four
+  // loads in flight at a time; then thread c sums component c's lanes in
+  // order, and thread 0 reads the totals. Thread 0 summing all 232 lane
+  // sums itself took 4 000 cycles of every solver step (H200, clock64).
   if (t < warps * n) {
-    const int c = t % n, q = t / n;
+    const int c = t % n, q = t / n, end = first + count;
+    double v[4] = {0, 0, 0, 0};
+    int j = first + q;
+    for (; j + 3 * warps < end; j += 4 * warps) {
+      double loaded[4];
+#pragma unroll
+      for (int k = 0; k < 4; ++k) loaded[k] = __ldcg(&partials[j + k * warps].component(c));
+#pragma unroll
+      for (int k = 0; k < 4; ++k) v[k] += loaded[k];
+    }
+    for (int k = 0; j < end; j += warps, ++k) v[k & 3] += __ldcg(&partials[j].component(c));
+    sums[q][c] = (v[0] + v[1]) + (v[2] + v[3]);
+  }
+  __syncthreads();
+  if (t < n) {
     double v = 0;
-    for (int j = first + q; j < first + count; j += warps) v += __ldcg(&partials[j].component(c));
-    sums[q][c] = v;
+    for (int q = 0; q < warps; ++q) v += sums[q][t];
+    sums[0][t] = v;  // lane 0 of component t is read only by this thread
   }
   __syncthreads();
   if (t == 0) {
     T total = zero;
-    for (int c = 0; c < n; ++c) {
-      double v = 0;
-      for (int q = 0; q < warps; ++q) v += sums[q][c];
-      total.component(c) = v;
-    }
+#pragma unroll
+    for (int c = 0; c < n; ++c) total.component(c) = sums[0][c];
     layout.counters[g] = 0;
     finish(g, total);
   }

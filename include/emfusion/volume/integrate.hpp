@@ -158,25 +158,38 @@ struct VoxelUpdate {
   }
 };
 
-/// Integrates one column of voxels (x, y, all z): consecutive z share the
-/// ray arithmetic, and neighbouring threads touch neighbouring voxels.
+/// Integrates a run of `z_run` voxels of one column (x, y, z in [r z_run,
+/// (r + 1) z_run)), index i = column + r * columns: consecutive z share the
+/// ray arithmetic, and neighbouring threads touch neighbouring voxels. On
+/// the CPU a run is the whole column; on a device a column is cut into
+/// runs, since an object's volume has too few columns (64^2 to 128^2) to
+/// fill the GPU with a thread each.
 template <class S, class Store>
 struct IntegrateColumn {
   TsdfView<S, Store> volume;
   VoxelUpdate<S> update;
   SE3<S> T_camera_volume;
   S far;  ///< no voxel deeper than this (camera z) is updated
+  int z_run;
 
-  EMF_HD void operator()(int column) const {
+  EMF_HD void operator()(int i) const {
+    const int columns = volume.nx * volume.ny;
+    const int column = i % columns, run = i / columns;
     const int x = column % volume.nx, y = column / volume.nx;
     const Vec3<S> start = T_camera_volume * volume.voxel_center(x, y, 0);
     const Vec3<S> step = T_camera_volume.rotate(vec3(S(0), S(0), volume.voxel_size));
-    int z_begin = 0, z_end = volume.nz;
+    int z_begin = run * z_run, z_end = z_begin + z_run < volume.nz ? z_begin + z_run : volume.nz;
     if (!clip_column_to_frustum(update.camera, start, step, far, z_begin, z_end)) return;
     for (int z = z_begin; z < z_end; ++z) {
-      const std::int64_t i = volume.index(x, y, z);
-      update(start + S(z) * step, volume.sdf[i], volume.weight[i]);
+      const std::int64_t v = volume.index(x, y, z);
+      update(start + S(z) * step, volume.sdf[v], volume.weight[v]);
     }
+  }
+
+  /// Voxels a thread walks along z on backend B.
+  template <class B>
+  static int run_length(int nz) {
+    return B::is_device ? (nz < 8 ? nz : 8) : nz;
   }
 };
 
@@ -433,14 +446,20 @@ void integrate(TsdfVolume<S, B, Store>& volume, const Image<S, B>& depth, const 
       depth, camera, weights, params, volume.voxel_size(), volume.truncation(), volume.backend(),
       workspace ? *workspace : local, "integrate",
       projected_box(camera, T_camera_volume, Vec3<S>::zero(), volume.view().extent()));
-  detail::IntegrateColumn<S, Store> f{volume.view(), update, T_camera_volume, std::numeric_limits<S>::infinity()};
+  const int nz = volume.dims()[2];
+  const int z_run = detail::IntegrateColumn<S, Store>::template run_length<B>(nz);
+  detail::IntegrateColumn<S, Store> f{volume.view(), update, T_camera_volume, std::numeric_limits<S>::infinity(),
+                                      z_run};
   // The far plane pays on the CPU, where voxels are visited one by one; on a
   // device the reduction's round trip costs more than the voxels it skips.
   if constexpr (!B::is_device) {
     f.far = max_valid_depth(depth) + volume.truncation();
     if (!(f.far > volume.truncation())) return;  // no measurement at all
   }
-  for_each_index(volume.backend(), volume.dims()[0] * volume.dims()[1], f);
+  // A thread a run: fewer than 2^31 of them for volumes below 2^34 voxels
+  // (64 GiB even in half storage).
+  const int runs = (nz + z_run - 1) / z_run;
+  for_each_index(volume.backend(), volume.dims()[0] * volume.dims()[1] * runs, f);
 }
 
 }  // namespace emfusion
