@@ -80,9 +80,9 @@ int area(const std::vector<bool>& m) { return int(std::count(m.begin(), m.end(),
 TEST_CASE("make_dynamic_room and DynamicScene reject bad arguments", "[sim]") {
   auto params = small_room(3, 10);
   params.moving_objects = -1;
-  CHECK_THROWS_WITH(sim::make_dynamic_room<float>(params), EMF_CONTAINS("moving_objects must be in 0..8, got -1"));
-  params.moving_objects = 9;
-  CHECK_THROWS_WITH(sim::make_dynamic_room<float>(params), EMF_CONTAINS("moving_objects must be in 0..8, got 9"));
+  CHECK_THROWS_WITH(sim::make_dynamic_room<float>(params), EMF_CONTAINS("moving_objects must be in 0..16, got -1"));
+  params.moving_objects = 17;
+  CHECK_THROWS_WITH(sim::make_dynamic_room<float>(params), EMF_CONTAINS("moving_objects must be in 0..16, got 17"));
   params = small_room(3, 10);
   params.camera_path = sim::CameraPath(7);
   CHECK_THROWS_WITH(sim::make_dynamic_room<float>(params),
@@ -111,9 +111,9 @@ TEST_CASE("make_dynamic_room and DynamicScene reject bad arguments", "[sim]") {
   ball.shapes.push_back(sim::make_plane(SE3<float>()));
   CHECK_THROWS_WITH(sim::DynamicScene<float>(PinholeCamera<float>{}, {}, {ball}, {SE3<double>()}),
                     EMF_CONTAINS("objects must be bounded"));
-  std::vector<sim::Shape<float>> many(40, sim::make_sphere(Vec3<float>::zero(), 1.0f));
+  std::vector<sim::Shape<float>> many(50, sim::make_sphere(Vec3<float>::zero(), 1.0f));
   CHECK_THROWS_WITH(sim::DynamicScene<float>(PinholeCamera<float>{}, many, {}, {SE3<double>()}),
-                    EMF_CONTAINS("40 shapes do not fit into a Scene (capacity 32)"));
+                    EMF_CONTAINS("50 shapes do not fit into a Scene (capacity 48)"));
 }
 
 TEST_CASE("Objects start at rest, move smoothly within the limits and never overlap", "[sim]") {

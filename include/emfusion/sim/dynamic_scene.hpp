@@ -364,7 +364,7 @@ struct DynamicSceneParams {
   SceneLayout layout = SceneLayout::room;
   int frames = 300;
   int width = 640, height = 480;  ///< intrinsics scale with width: f = 525 * width / 640
-  int moving_objects = 3;         ///< 0..8 in the room, 0..6 in the corridor (0: a static scene)
+  int moving_objects = 3;         ///< 0..16 in the room, 0..6 in the corridor (0: a static scene)
   std::uint64_t seed = 1;         ///< object placement, motions, fast segments and depth noise
   bool moving_camera = true;      ///< false: the camera stays at its first pose
   CameraPath camera_path = CameraPath::hand_held;  ///< the room's camera (the corridor has its own walk)
@@ -407,11 +407,19 @@ struct Kind {
   bool on_floor;       // else on the table
 };
 
+/// Objects a room holds (make_dynamic_room): one of each kind.
+constexpr int max_objects = 16;
+
 // Classes in the order objects are created; the first three match the README
-// of room_dyn_300 (car, cup, book).
-inline const Kind kinds[8] = {
+// of room_dyn_300 (car, cup, book). Kinds 8..15 only appear in rooms of more
+// than 8 objects: a bowl, a handbag, a suitcase and a cat, and smaller
+// variants of the cup, book, car and bottle; they alternate between the
+// table and the floor.
+inline const Kind kinds[max_objects] = {
     {"car", 0.09, false},        {"cup", 0.11, false},         {"book", 0.05, false},    {"backpack", 0.16, true},
     {"teddy_bear", 0.16, false}, {"potted_plant", 0.17, true}, {"laptop", 0.112, false}, {"bottle", 0.09, true},
+    {"bowl", 0.06, false},       {"handbag", 0.11, true},      {"cup", 0.095, false},    {"suitcase", 0.15, true},
+    {"book", 0.045, false},      {"cat", 0.1, true},          {"car", 0.075, false},    {"bottle", 0.075, true},
 };
 
 /// Object-frame shapes of kind k: two primitives each, placed off-centre so
@@ -439,8 +447,28 @@ std::vector<Shape<S>> kind_shapes(int kind) {
       return {make_cylinder(at(0, 0, -0.09), S(0.09), S(0.08)), make_sphere(vec3(S(0.04), S(0.02), S(0.05)), S(0.12))};
     case 6:  // open laptop: base and the screen at its back edge
       return {make_box(at(0, 0, -0.1), half(0.16, 0.12, 0.012)), make_box(at(0, 0.11, 0), half(0.16, 0.01, 0.11))};
-    default:  // bottle lying on its side: body and neck along x
+    case 7:  // bottle lying on its side: body and neck along x
       return {make_cylinder(along_x_at(-0.06), S(0.09), S(0.1)), make_cylinder(along_x_at(0.1), S(0.035), S(0.06))};
+    case 8:  // bowl with a fruit in it, off the bowl's axis
+      return {make_cylinder(at(0, 0, -0.025), S(0.12), S(0.035)), make_sphere(vec3(S(0.04), S(0.02), S(0)), S(0.06))};
+    case 9:  // handbag: bag and a handle towards one end
+      return {make_box(at(0, 0, -0.03), half(0.12, 0.05, 0.08)), make_box(at(0.035, 0, 0.08), half(0.045, 0.01, 0.03))};
+    case 10:  // smaller mug
+      return {make_cylinder(at(-0.025, 0, 0), S(0.085), S(0.095)),
+              make_box(at(0.085, 0, 0), half(0.03, 0.016, 0.055))};
+    case 11:  // upright suitcase: case and a handle off-centre on top
+      return {make_box(at(0, 0, -0.02), half(0.11, 0.06, 0.13)), make_box(at(0.045, 0, 0.13), half(0.035, 0.01, 0.02))};
+    case 12:  // two smaller stacked books, the top one shifted the other way
+      return {make_box(at(0, 0, -0.02), half(0.1, 0.13, 0.025)),
+              make_box(at(-0.02, -0.03, 0.025), half(0.08, 0.1, 0.02))};
+    case 13:  // cat lying down: body and a head at one end
+      return {make_box(at(-0.03, 0, -0.04), half(0.11, 0.06, 0.06)), make_sphere(vec3(S(0.1), S(0), S(0.04)), S(0.06))};
+    case 14:  // smaller toy car
+      return {make_box(at(0, 0, -0.03), half(0.14, 0.075, 0.045)),
+              make_box(at(-0.04, 0, 0.035), half(0.065, 0.065, 0.04))};
+    default:  // smaller bottle lying on its side
+      return {make_cylinder(along_x_at(-0.05), S(0.075), S(0.085)),
+              make_cylinder(along_x_at(0.085), S(0.03), S(0.05))};
   }
 }
 
@@ -715,19 +743,71 @@ inline std::vector<ObjectPlan> plan_objects(int count, int frames, std::uint64_t
     return true;
   };
 
+  // Rooms of more than 8 objects: drawn anywhere on their support, the first
+  // objects leave no room for sixteen, so each object starts at a slot
+  // (jittered by 2 cm). Each support has two rows of slots, as far apart in
+  // depth as the object allows; the far row's sit between the lines of
+  // sight through the near row's, so that the camera's sweep rarely lines
+  // two up. Per support, objects take the far row's slots first, largest
+  // first (the near row's are closer together), each row's in an order from
+  // the seed; an object that does not fit at its slot tries the free ones,
+  // then anywhere. Floor objects move on the floor up to under the table's
+  // front edge (they are lower than the table top).
+  const bool crowded = count > 8;
+  std::vector<Vec2<double>> slots[2];  // [0] table, [1] floor, in the order objects take them
+  std::vector<int> slot_of(static_cast<std::size_t>(count), -1);
+  if (crowded) {
+    HashRng order(seed, 999);
+    const auto row = [&](std::vector<Vec2<double>>& to, double y, std::vector<double> xs) {
+      for (int i = int(xs.size()) - 1; i > 0; --i) std::swap(xs[std::size_t(i)], xs[std::size_t(order.integer(0, i))]);
+      for (double x : xs) to.push_back(vec2(x, y));
+    };
+    row(slots[0], 1.35, {-0.81, -0.27, 0.27, 0.81});  // y clamped to the table
+    row(slots[0], 0.25, {-0.8, -0.4, 0.0, 0.4, 0.8});
+    row(slots[1], 0.25, {-0.86, -0.3, 0.3, 0.86});
+    row(slots[1], -0.12, {-0.58, 0.0, 0.58});
+    for (const bool floor : {false, true}) {
+      std::vector<int> objects;
+      for (int k = 0; k < count; ++k)
+        if (kinds[k].on_floor == floor) objects.push_back(k);
+      std::stable_sort(objects.begin(), objects.end(),
+                       [&](int a, int b) { return radius[std::size_t(a)] > radius[std::size_t(b)]; });
+      for (std::size_t i = 0; i < objects.size(); ++i) slot_of[std::size_t(objects[i])] = int(i);
+    }
+  }
+  std::vector<bool> slot_taken[2] = {std::vector<bool>(slots[0].size()), std::vector<bool>(slots[1].size())};
+
   // Initial rest poses, each clear of the objects placed before it.
   for (int k = 0; k < count; ++k) {
     ObjectPlan& p = plans[std::size_t(k)];
     const Kind& kind = kinds[k];
     p.radius = radius[std::size_t(k)];
     p.z_rest = (kind.on_floor ? 0.0 : table_top) + kind.half_height;
-    if (kind.on_floor) {
+    if (kind.on_floor && crowded) {
+      p.x_lo = -0.9, p.x_hi = 0.9, p.y_lo = -0.3, p.y_hi = 0.4;
+    } else if (kind.on_floor) {
       p.x_lo = -0.8, p.x_hi = 0.8, p.y_lo = -0.25, p.y_hi = 0.05;
     } else {
       p.x_lo = -1.1 + p.radius, p.x_hi = 1.1 - p.radius, p.y_lo = 0.25 + p.radius, p.y_hi = 1.35 - p.radius;
     }
     HashRng rng(seed, 1000 + std::uint64_t(k));
     bool placed = false;
+    if (crowded) {
+      const int own = slot_of[std::size_t(k)];
+      auto& taken = slot_taken[kind.on_floor ? 1 : 0];
+      for (int i = 0; i <= int(taken.size()) && !placed; ++i) {
+        const int slot = i == 0 ? own : i - 1;  // its own first, then the free ones
+        if (taken[std::size_t(slot)] || (i > 0 && slot == own)) continue;
+        const Vec2<double> at = slots[kind.on_floor ? 1 : 0][std::size_t(slot)];
+        for (int attempt = 0; attempt < 50 && !placed; ++attempt) {
+          ObjectPlan c = p;
+          c.x = std::clamp(at.x() + rng.uniform(-0.02, 0.02), p.x_lo, p.x_hi);
+          c.y = std::clamp(at.y() + rng.uniform(-0.02, 0.02), p.y_lo, p.y_hi);
+          c.yaw = rng.uniform(-pi, pi);
+          if (fits(k, k, 0, c)) p = c, placed = true, taken[std::size_t(slot)] = true;
+        }
+      }
+    }
     for (int attempt = 0; attempt < 2000 && !placed; ++attempt) {
       ObjectPlan c = p;
       c.x = rng.uniform(p.x_lo, p.x_hi), c.y = rng.uniform(p.y_lo, p.y_hi), c.yaw = rng.uniform(-pi, pi);
@@ -795,14 +875,19 @@ inline std::vector<ObjectPlan> plan_objects(int count, int frames, std::uint64_t
 /// between), never overlapping and kept in view, and a hand-held camera
 /// 1.8-2.8 m from them (params.camera_path: slow, or with fast segments).
 /// Object k is "<class>_<k+1>": car, cup, book, backpack, teddy_bear,
-/// potted_plant, laptop, bottle.
+/// potted_plant, laptop, bottle, and in rooms of more than 8 (up to 16)
+/// bowl, handbag, cup, suitcase, book, cat, car, bottle (the repeated
+/// classes smaller). Rooms of up to 8 objects do not depend on the kinds
+/// after the eighth; rooms of more start every object at a slot of its own
+/// (detail::room::plan_objects), and their floor objects use more of the
+/// floor.
 template <class S>
 DynamicScene<S> make_dynamic_room(const DynamicSceneParams& params = {}) {
   const char* where = "make_dynamic_room";
   emfusion::detail::require(
       params.camera_path == CameraPath::hand_held || params.camera_path == CameraPath::hand_held_fast, where,
       "camera_path must be hand_held or hand_held_fast, got " + std::to_string(int(params.camera_path)));
-  const PinholeCamera<double> camera = detail::scene_camera(params, 8, where);
+  const PinholeCamera<double> camera = detail::scene_camera(params, detail::room::max_objects, where);
   std::vector<SE3<double>> T_world_camera, T_camera_world;
   const bool fast = params.camera_path == CameraPath::hand_held_fast;
   const detail::room::FastPath fast_path =

@@ -81,7 +81,7 @@ Shape<S> make_cylinder(const SE3<S>& T_world_shape, S radius, S half_height) {
 /// A fixed-capacity union of shapes, copied by value into kernels.
 template <class S>
 struct Scene {
-  static constexpr int capacity = 32;
+  static constexpr int capacity = 48;
   Shape<S> shapes[capacity];
   int count = 0;
 
