@@ -12,20 +12,11 @@
 
 #include "emfusion/sim/dynamic_scene.hpp"
 #include "support/catch.hpp"
+#include "support/small_room.hpp"
 
 using namespace emfusion;
 
 namespace {
-
-sim::DynamicSceneParams crowded_room(int objects, int frames, std::uint64_t seed = 1) {
-  sim::DynamicSceneParams p;
-  p.moving_objects = objects;
-  p.frames = frames;
-  p.width = 160;
-  p.height = 120;
-  p.seed = seed;
-  return p;
-}
 
 double yaw_of(const SE3<double>& T) { return std::atan2(T.rotation()(1, 0), T.rotation()(0, 0)); }
 
@@ -33,7 +24,7 @@ double yaw_of(const SE3<double>& T) { return std::atan2(T.rotation()(1, 0), T.ro
 
 TEST_CASE("A room of 16 objects: distinct, apart, in view, moving within the limits", "[sim]") {
   constexpr int n = 16, frames = 300;
-  const auto scene = sim::make_dynamic_room<double>(crowded_room(n, frames));
+  const auto scene = sim::make_dynamic_room<double>(test::small_room(n, frames));
   REQUIRE(scene.object_count() == n);
 
   // Names "<class>_<k+1>", all different; the first eight as in smaller rooms.
@@ -104,12 +95,12 @@ TEST_CASE("Rooms of 9..16 objects build for the benches' seeds", "[sim]") {
   for (const std::uint64_t seed : {1u, 2u, 3u, 7u, 42u})
     for (const int frames : {120, 300}) {
       CAPTURE(seed, frames);
-      const auto scene = sim::make_dynamic_room<float>(crowded_room(16, frames, seed));
+      const auto scene = sim::make_dynamic_room<float>(test::small_room(16, frames, seed));
       CHECK(scene.object_count() == 16);
     }
   for (int n = 9; n <= 15; ++n) {
     CAPTURE(n);
-    const auto scene = sim::make_dynamic_room<float>(crowded_room(n, 300));
+    const auto scene = sim::make_dynamic_room<float>(test::small_room(n, 300));
     CHECK(scene.object_count() == n);
     CHECK(scene.object_name(n - 1) == scene.object_class(n - 1) + "_" + std::to_string(n));
   }
@@ -149,7 +140,7 @@ TEST_CASE("Rooms of up to 8 objects are unchanged by the larger room", "[sim]") 
       {7, 100, -0.698307489890, -0.194015290995, 0.157887812704, 1.583803414548},
       {7, 299, -0.603852439487, -0.166427164385, 0.161511133224, 0.634204825760},
   };
-  const auto eight = sim::make_dynamic_room<double>(crowded_room(8, 300));
+  const auto eight = sim::make_dynamic_room<double>(test::small_room(8, 300));
   for (const Row& r : rows) {
     CAPTURE(r.k, r.f);
     const SE3<double> T = eight.object_pose(r.k, r.f);
@@ -162,7 +153,7 @@ TEST_CASE("Rooms of up to 8 objects are unchanged by the larger room", "[sim]") 
   // objects' starting poses do not depend on the objects after them.
   for (int n = 1; n < 8; ++n) {
     CAPTURE(n);
-    const auto room = sim::make_dynamic_room<double>(crowded_room(n, 300));
+    const auto room = sim::make_dynamic_room<double>(test::small_room(n, 300));
     for (int k = 0; k < n; ++k)
       CHECK(max_abs_diff(room.object_pose(k, 0).matrix(), eight.object_pose(k, 0).matrix()) == 0.0);
   }

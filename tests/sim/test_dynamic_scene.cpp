@@ -15,21 +15,12 @@
 #include "emfusion/sim/dynamic_scene.hpp"
 #include "emfusion/sim/render.hpp"
 #include "support/catch.hpp"
+#include "support/small_room.hpp"
 #include "support/configs.hpp"
 
 using namespace emfusion;
 
 namespace {
-
-sim::DynamicSceneParams small_room(int objects, int frames = 300, std::uint64_t seed = 1) {
-  sim::DynamicSceneParams p;
-  p.moving_objects = objects;
-  p.frames = frames;
-  p.width = 160;
-  p.height = 120;
-  p.seed = seed;
-  return p;
-}
 
 double angle_between(const SE3<double>& a, const SE3<double>& b) { return norm(so3_log((a.inverse() * b).rotation())); }
 
@@ -78,26 +69,26 @@ int area(const std::vector<bool>& m) { return int(std::count(m.begin(), m.end(),
 }  // namespace
 
 TEST_CASE("make_dynamic_room and DynamicScene reject bad arguments", "[sim]") {
-  auto params = small_room(3, 10);
+  auto params = test::small_room(3, 10);
   params.moving_objects = -1;
   CHECK_THROWS_WITH(sim::make_dynamic_room<float>(params), EMF_CONTAINS("moving_objects must be in 0..16, got -1"));
   params.moving_objects = 17;
   CHECK_THROWS_WITH(sim::make_dynamic_room<float>(params), EMF_CONTAINS("moving_objects must be in 0..16, got 17"));
-  params = small_room(3, 10);
+  params = test::small_room(3, 10);
   params.camera_path = sim::CameraPath(7);
   CHECK_THROWS_WITH(sim::make_dynamic_room<float>(params),
                     EMF_CONTAINS("camera_path must be hand_held or hand_held_fast, got 7"));
-  params = small_room(3, 0);
+  params = test::small_room(3, 0);
   CHECK_THROWS_WITH(sim::make_dynamic_room<float>(params), EMF_CONTAINS("frames must be >= 1, got 0"));
-  params = small_room(3, 10);
+  params = test::small_room(3, 10);
   params.width = 8;
   CHECK_THROWS_WITH(sim::make_dynamic_room<float>(params),
                     EMF_CONTAINS("image size must be at least 16x16, got 8x120"));
-  params = small_room(3, 10);
+  params = test::small_room(3, 10);
   params.noise.dropout_probability = 2;
   CHECK_THROWS_WITH(sim::make_dynamic_room<float>(params), EMF_CONTAINS("dropout_probability must be in [0, 1]"));
 
-  const auto scene = sim::make_dynamic_room<float>(small_room(3, 10));
+  const auto scene = sim::make_dynamic_room<float>(test::small_room(3, 10));
   CHECK_THROWS_WITH(scene.object_pose(3, 0), EMF_CONTAINS("DynamicScene::object_pose: object 3 is not in 0..2"));
   CHECK_THROWS_WITH(scene.camera_pose(10), EMF_CONTAINS("DynamicScene::camera_pose: frame 10 is not in 0..9"));
   Image<float, Host> depth;
@@ -119,7 +110,7 @@ TEST_CASE("make_dynamic_room and DynamicScene reject bad arguments", "[sim]") {
 TEST_CASE("Objects start at rest, move smoothly within the limits and never overlap", "[sim]") {
   for (int objects : {1, 3, 8}) {
     CAPTURE(objects);
-    const auto scene = sim::make_dynamic_room<double>(small_room(objects));
+    const auto scene = sim::make_dynamic_room<double>(test::small_room(objects));
     REQUIRE(scene.frame_count() == 300);
     REQUIRE(scene.object_count() == objects);
     CHECK(scene.timestamp(45) == test::Approx(1.5));
@@ -183,7 +174,7 @@ TEST_CASE("Objects start at rest, move smoothly within the limits and never over
   }
 
   // The camera: smooth and slow; still when asked.
-  auto params = small_room(3);
+  auto params = test::small_room(3);
   const auto scene = sim::make_dynamic_room<double>(params);
   const auto camera = scene.camera_trajectory();
   REQUIRE(camera.size() == 300u);
@@ -208,7 +199,7 @@ TEST_CASE("Objects start at rest, move smoothly within the limits and never over
 TEMPLATE_LIST_TEST_CASE("Rendered labels agree with the object poses", "[sim]", emfusion::test::AllConfigs) {
   using S = typename TestType::Scalar;
   using B = typename TestType::Backend;
-  const auto scene = sim::make_dynamic_room<S>(small_room(3, 120));
+  const auto scene = sim::make_dynamic_room<S>(test::small_room(3, 120));
   const auto& cam = scene.camera();
   CHECK(double(cam.fx) == test::Approx(525.0 * 160 / 640));
   CHECK(double(cam.cx) == test::Approx(79.5));
@@ -358,9 +349,9 @@ TEMPLATE_LIST_TEST_CASE("Depth noise follows the Kinect model", "[sim]", emfusio
 }
 
 TEST_CASE("Dynamic rooms are reproducible from their seed", "[sim]") {
-  const auto a = sim::make_dynamic_room<float>(small_room(3, 40, 5));
-  const auto b = sim::make_dynamic_room<float>(small_room(3, 40, 5));
-  const auto c = sim::make_dynamic_room<float>(small_room(3, 40, 6));
+  const auto a = sim::make_dynamic_room<float>(test::small_room(3, 40, 5));
+  const auto b = sim::make_dynamic_room<float>(test::small_room(3, 40, 5));
+  const auto c = sim::make_dynamic_room<float>(test::small_room(3, 40, 6));
   Image<float, Host> da, db, dc;
   a.render(20, da);
   b.render(20, db);
@@ -372,7 +363,7 @@ TEST_CASE("Dynamic rooms are reproducible from their seed", "[sim]") {
 }
 
 TEST_CASE("A static room: no moving objects, only the camera moves", "[sim]") {
-  const auto scene = sim::make_dynamic_room<float>(small_room(0, 20));
+  const auto scene = sim::make_dynamic_room<float>(test::small_room(0, 20));
   CHECK(scene.object_count() == 0);
   Image<float, Host> depth;
   Image<int, Host> labels;
@@ -383,7 +374,7 @@ TEST_CASE("A static room: no moving objects, only the camera moves", "[sim]") {
   CHECK(std::all_of(l.begin(), l.end(), [](int k) { return k == 0; }));
   // The static shapes render the same as in a room with objects wherever
   // no object is seen.
-  const auto with_objects = sim::make_dynamic_room<float>(small_room(3, 20));
+  const auto with_objects = sim::make_dynamic_room<float>(test::small_room(3, 20));
   Image<float, Host> depth3;
   Image<int, Host> labels3;
   with_objects.render(10, depth3, &labels3, false);
@@ -409,7 +400,7 @@ std::pair<double, double> camera_speed(const sim::DynamicScene<float>& scene, in
 }  // namespace
 
 TEST_CASE("The fast hand-held path: eased fast segments within the stated peaks", "[sim]") {
-  auto params = small_room(0, 900, 1);
+  auto params = test::small_room(0, 900, 1);
   params.camera_path = sim::CameraPath::hand_held_fast;
   const auto fast = sim::make_dynamic_room<float>(params);
   params.camera_path = sim::CameraPath::hand_held;
@@ -486,7 +477,7 @@ TEST_CASE("Every object is visible in most frames", "[sim]") {
   const double min_area = 1600.0 * w * h / (640.0 * 480.0);  // 40 x 40 px at 640 x 480
   for (int objects : {1, 3, 8}) {
     CAPTURE(objects);
-    const auto scene = sim::make_dynamic_room<float>(small_room(objects, 300, 3));
+    const auto scene = sim::make_dynamic_room<float>(test::small_room(objects, 300, 3));
     std::vector<int> visible(std::size_t(objects), 0);
     int frames = 0;
     Image<float, Host> depth;
@@ -505,7 +496,7 @@ TEST_CASE("Every object is visible in most frames", "[sim]") {
 
 TEST_CASE("SyntheticSequence is a FrameSource of noisy depth", "[sim]") {
   static_assert(FrameSource<sim::SyntheticSequence>);
-  const sim::SyntheticSequence sequence(small_room(2, 12));
+  const sim::SyntheticSequence sequence(test::small_room(2, 12));
   CHECK(sequence.size() == 12u);
   CHECK(sequence.timestamp(6) == test::Approx(0.2));
   const PinholeCamera<double> cam = sequence.camera();
@@ -523,7 +514,7 @@ TEST_CASE("The simulated detector runs every period frames", "[sim]") {
   static_assert(Segmenter<sim::SimulatedDetector<float>>);
   auto params = sim::SimulatedDetectorParams{};
   params.period = 30;
-  sim::SimulatedDetector<float> detector(sim::make_dynamic_room<float>(small_room(3, 91)), params);
+  sim::SimulatedDetector<float> detector(sim::make_dynamic_room<float>(test::small_room(3, 91)), params);
   std::vector<int> ran;
   for (int f = 0; f < 91; ++f)
     if (auto d = detector.detect(f, f / 30.0)) {
@@ -544,7 +535,7 @@ TEST_CASE("The simulated detector runs every period frames", "[sim]") {
 }
 
 TEST_CASE("The exact simulated detector reports the ground-truth masks", "[sim]") {
-  const auto scene = sim::make_dynamic_room<float>(small_room(8, 61));
+  const auto scene = sim::make_dynamic_room<float>(test::small_room(8, 61));
   sim::SimulatedDetector<float> detector(scene, sim::SimulatedDetectorParams::exact());
   const double min_area = 1600.0 / 16;
   for (int f : {0, 30, 60}) {
@@ -574,7 +565,7 @@ TEST_CASE("The exact simulated detector reports the ground-truth masks", "[sim]"
 }
 
 TEST_CASE("The simulated detector's masks, misses and false positives", "[sim]") {
-  const auto scene = sim::make_dynamic_room<float>(small_room(8, 24, 2));
+  const auto scene = sim::make_dynamic_room<float>(test::small_room(8, 24, 2));
   auto params = sim::SimulatedDetectorParams{};
   params.period = 1;
   params.false_positive_probability = 0.25;  // see some in a short run
