@@ -11,7 +11,7 @@
 //
 // <input> is, by what is on disk (docs/io.md, "Inputs of the emfusion app"):
 //   synthetic:<scene>   a built-in scene (room, room-small, room1, room8,
-//                       corridor, corridor-small; no data needed), with
+//                       room16, corridor, corridor-small; no data needed), with
 //                       ground truth and a simulated detector;
 //   <file>.klg          an ElasticFusion/Co-Fusion log; camera from
 //                       --calibration, --intrinsics or the "default" preset,
@@ -126,8 +126,8 @@ std::optional<sim::DynamicSceneParams> synthetic_params(const std::string& input
     p.width = 320, p.height = 240, p.frames = 150;
     return p;
   }
-  if (name == "room1" || name == "room8") {
-    p.moving_objects = name == "room1" ? 1 : 8;
+  if (name == "room1" || name == "room8" || name == "room16") {
+    p.moving_objects = name == "room1" ? 1 : name == "room8" ? 8 : 16;
     return p;
   }
   if (name == "corridor" || name == "corridor-small") {  // an 11 m walk with four moving objects
@@ -138,7 +138,7 @@ std::optional<sim::DynamicSceneParams> synthetic_params(const std::string& input
     return p;
   }
   throw std::invalid_argument("unknown synthetic scene '" + name +
-                              "' (room, room-small, room1, room8, corridor, corridor-small)");
+                              "' (room, room-small, room1, room8, room16, corridor, corridor-small)");
 }
 
 /// The kinds of input `run` reads.
