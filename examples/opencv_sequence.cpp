@@ -34,8 +34,8 @@
 #include "emfusion/interop/opencv.hpp"
 #include "emfusion/io/masks.hpp"
 #include "emfusion/io/tum.hpp"
-#include "emfusion/slam/system.hpp"
 #include "support/args.hpp"
+#include "support/system_host.hpp"  // emfusion/slam/system.hpp, System<float, Host> compiled once
 
 using namespace emfusion;
 

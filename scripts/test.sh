@@ -6,11 +6,14 @@
 #      they run once, in step 3; with EMFUSION_SKIP_SANITIZERS=1 here): the
 #      examples and their runs, the benchmarks' runs, the consumer,
 #   3. builds the unit tests under AddressSanitizer + UBSan in build-asan/
-#      (preset asan-ubsan) and runs the ctest suite there, two at a time;
-#      not what only the release build runs (label release_only: the long
-#      simulated runs, the app and the tools beside it, the consumer),
+#      (preset asan-ubsan; the test files compiled in unity groups and
+#      Catch2's runner once, tests/CMakeLists.txt) and runs the ctest suite
+#      there, two at a time; not what only the release build runs (label
+#      release_only: the long simulated runs, the app and the tools beside
+#      it, the consumer),
 #   4. fuzzes every parser for EMFUSION_FUZZ_SECONDS each (scripts/fuzz.sh,
-#      clang + libFuzzer, build-fuzz/),
+#      clang + libFuzzer, build-fuzz/; the fuzzers compiled EMFUSION_JOBS at
+#      a time, then run as many at a time),
 #   5. when nvcc is present, configures build-cuda/ and compiles the targets
 #      that instantiate every algorithm on CUDA (the app and track_camera)
 #      without running them (CI has no GPU), so that the CUDA code path keeps
