@@ -228,7 +228,7 @@ std::vector<int> parse_sweep(const std::string& flag, const std::string& value) 
   std::size_t start = 0;
   while (true) {
     const std::size_t comma = value.find(',', start);
-    counts.push_back(examples::parse_int(flag, value.substr(start, comma - start), 1, 16));
+    counts.push_back(examples::parse_int(flag, value.substr(start, comma - start), 1, sim::max_room_objects));
     if (comma == std::string::npos) break;
     start = comma + 1;
   }
@@ -246,7 +246,7 @@ int main(int argc, char** argv) {
     examples::for_each_option(argc, argv, [&](const std::string& a, const std::string& v) {
       if (a == "--backend") o.backend = v;
       else if (a == "--frames") o.frames = examples::parse_positive_int(a, v);
-      else if (a == "--objects") o.objects = examples::parse_int(a, v, 1, 16);
+      else if (a == "--objects") o.objects = examples::parse_int(a, v, 1, sim::max_room_objects);
       else if (a == "--width") o.width = examples::parse_int(a, v, 64, 4096);
       else if (a == "--voxels") o.voxels = examples::parse_int(a, v, 8, 2048);
       else if (a == "--voxel-size") o.voxel_size = examples::parse_positive_double(a, v);

@@ -359,6 +359,9 @@ enum class SceneLayout {
   corridor,
 };
 
+/// The most moving objects make_dynamic_room places (one of each kind).
+constexpr int max_room_objects = 16;
+
 /// What make_dynamic_room and make_dynamic_corridor build (make_dynamic_scene picks by `layout`).
 struct DynamicSceneParams {
   SceneLayout layout = SceneLayout::room;
@@ -407,15 +410,12 @@ struct Kind {
   bool on_floor;       // else on the table
 };
 
-/// Objects a room holds (make_dynamic_room): one of each kind.
-constexpr int max_objects = 16;
-
 // Classes in the order objects are created; the first three match the README
 // of room_dyn_300 (car, cup, book). Kinds 8..15 only appear in rooms of more
 // than 8 objects: a bowl, a handbag, a suitcase and a cat, and smaller
 // variants of the cup, book, car and bottle; they alternate between the
 // table and the floor.
-inline const Kind kinds[max_objects] = {
+inline const Kind kinds[max_room_objects] = {
     {"car", 0.09, false},        {"cup", 0.11, false},         {"book", 0.05, false},    {"backpack", 0.16, true},
     {"teddy_bear", 0.16, false}, {"potted_plant", 0.17, true}, {"laptop", 0.112, false}, {"bottle", 0.09, true},
     {"bowl", 0.06, false},       {"handbag", 0.11, true},      {"cup", 0.095, false},    {"suitcase", 0.15, true},
@@ -887,7 +887,7 @@ DynamicScene<S> make_dynamic_room(const DynamicSceneParams& params = {}) {
   emfusion::detail::require(
       params.camera_path == CameraPath::hand_held || params.camera_path == CameraPath::hand_held_fast, where,
       "camera_path must be hand_held or hand_held_fast, got " + std::to_string(int(params.camera_path)));
-  const PinholeCamera<double> camera = detail::scene_camera(params, detail::room::max_objects, where);
+  const PinholeCamera<double> camera = detail::scene_camera(params, max_room_objects, where);
   std::vector<SE3<double>> T_world_camera, T_camera_world;
   const bool fast = params.camera_path == CameraPath::hand_held_fast;
   const detail::room::FastPath fast_path =
