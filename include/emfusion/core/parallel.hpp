@@ -9,6 +9,7 @@
 #include <algorithm>
 #include <concepts>
 #include <cstdint>
+#include <type_traits>
 
 #if defined(_OPENMP)
 #include <omp.h>
@@ -167,17 +168,20 @@ struct SegmentGroups {
 
 #if EMFUSION_HAS_CUDA
 namespace detail {
-/// grouped_accumulate on a device. Thread block s sums segment s: each
-/// thread the indices offsets[s] + t, + Threads, ..., then the block its
-/// threads' sums number by number (warp shuffles, then one value a warp in
-/// shared memory). The block that completes its group last (an atomic
-/// count) sums the group's segments, in an order fixed by the layout alone,
-/// and calls finish from one thread.
+inline constexpr int grouped_threads = 256;  ///< threads of a block of grouped_accumulate on a device
+
+/// Block s of grouped_accumulate on a device (accumulate_groups, and the
+/// passes of grouped_accumulate_while in core/grouped_loop.hpp). Thread
+/// block s sums segment s: each thread the indices offsets[s] + t,
+/// + Threads, ..., then the block its threads' sums number by number (warp
+/// shuffles, then one value a warp in shared memory). The block that
+/// completes its group last (an atomic count) sums the group's segments, in
+/// an order fixed by the layout alone, and calls finish from one thread.
 template <int Threads, class T, class F, class Finish>
-__global__ void __launch_bounds__(Threads)
-    accumulate_groups(F f, T zero, SegmentGroups layout, T* partials, Finish finish) {
+__device__ __forceinline__ void accumulate_group_block(int s, const F& f, const T& zero, const SegmentGroups& layout,
+                                                       T* partials, const Finish& finish) {
   constexpr int warps = Threads / 32, n = T::components;
-  const int s = int(blockIdx.x), t = int(threadIdx.x);
+  const int t = int(threadIdx.x);
   T acc = zero;
   for (int i = layout.offsets[s] + t; i < layout.offsets[s + 1]; i += Threads) f(i, acc);
   __shared__ double sums[warps][n];
@@ -235,8 +239,37 @@ __global__ void __launch_bounds__(Threads)
     finish(g, total);
   }
 }
+
+/// grouped_accumulate on a device: a block a segment.
+template <int Threads, class T, class F, class Finish>
+__global__ void __launch_bounds__(Threads)
+    accumulate_groups(F f, T zero, SegmentGroups layout, T* partials, Finish finish) {
+  accumulate_group_block<Threads>(int(blockIdx.x), f, zero, layout, partials, finish);
+}
 }  // namespace detail
 #endif
+
+namespace detail {
+/// grouped_accumulate on the CPU: the segments in parallel, then finish
+/// group after group. Returns whether any finish returned true (finish may
+/// return bool: grouped_accumulate_while goes on while one does).
+template <class B, class T, class F, class Finish>
+bool grouped_accumulate_on_host(const B& backend, const SegmentGroups& layout, const F& f, const T& zero, T* partials,
+                                const Finish& finish) {
+  for_each_index(backend, layout.segments, AccumulateSegment<T, F>{f, zero, layout.offsets, partials});
+  bool again = false;
+  for (int g = 0; g < layout.groups; ++g) {
+    T total = zero;
+    for (int j = layout.first_segment[g]; j < layout.first_segment[g + 1]; ++j) total += partials[j];
+    if constexpr (std::is_same_v<decltype(finish(g, total)), bool>) {
+      again = finish(g, total) || again;
+    } else {
+      finish(g, total);
+    }
+  }
+  return again;
+}
+}  // namespace detail
 
 /// For every group g of segments (SegmentGroups), calls finish(g, sum) with
 /// the sum of the contributions f(i, acc) (as accumulate_index) of every
@@ -254,19 +287,14 @@ void grouped_accumulate(const B& backend, const SegmentGroups& layout, F f, cons
   if (layout.segments <= 0) return;
   if constexpr (B::is_device) {
 #if EMFUSION_HAS_CUDA
-    constexpr int threads = 256;
+    constexpr int threads = detail::grouped_threads;
     static_assert(threads / 32 * T::components <= threads, "a block sums a group with one thread a number");
     detail::accumulate_groups<threads><<<layout.segments, threads, 0, backend.stream>>>(f, zero, layout, partials,
                                                                                         finish);
     detail::check_cuda(cudaGetLastError(), "grouped_accumulate: kernel launch");
 #endif
   } else {
-    for_each_index(backend, layout.segments, detail::AccumulateSegment<T, F>{f, zero, layout.offsets, partials});
-    for (int g = 0; g < layout.groups; ++g) {
-      T total = zero;
-      for (int j = layout.first_segment[g]; j < layout.first_segment[g + 1]; ++j) total += partials[j];
-      finish(g, total);
-    }
+    detail::grouped_accumulate_on_host(backend, layout, f, zero, partials, finish);
   }
 }
 

@@ -4,12 +4,13 @@
 // normal equations per problem and takes each problem's solver step
 // (LevenbergMarquardtIteration, solve/solvers.hpp: the algorithm of
 // levenberg_marquardt, written once) on the backend (grouped_accumulate,
-// core/parallel.hpp). On a GPU that pass is one kernel, the passes are
-// queued one after another, and the host looks only every few iterations
-// whether all problems have stopped; solved one by one, each iteration of
-// each problem waited for a reduction's copy to the host and a 6x6 solve
-// there. On the CPU the same code runs one problem after another (each a
-// batch of one), which keeps a problem's data in the cache.
+// core/parallel.hpp). On a GPU that pass is one kernel, and the passes
+// until every problem has stopped are one launch of a graph that decides
+// on the device whether to go on (grouped_accumulate_while,
+// core/grouped_loop.hpp); solved one by one, each iteration of each problem
+// waited for a reduction's copy to the host and a 6x6 solve there. On the
+// CPU the same code runs one problem after another (each a batch of one),
+// which keeps a problem's data in the cache.
 //
 // Each problem keeps the per-term values of its current pose (as a
 // LinearizationCache does), so a candidate is compared with the current
@@ -29,6 +30,7 @@
 #include <vector>
 
 #include "emfusion/core/backend.hpp"
+#include "emfusion/core/grouped_loop.hpp"
 #include "emfusion/core/parallel.hpp"
 #include "emfusion/core/se3.hpp"
 #include "emfusion/solve/normal_equations.hpp"
@@ -134,17 +136,18 @@ struct StoreSum {
 };
 
 /// After a term pass of a solve: the solver step of problem p, if it had
-/// asked for the pass, and its next request.
+/// asked for the pass, and its next request; whether it asks for another.
 template <class S>
 struct AdvanceSolve {
   LevenbergMarquardtIteration<S>* solves;
   LinearizationRequest<S>* requests;
   LevenbergMarquardtParams params;
 
-  EMF_HD void operator()(int p, const NormalEquations6& sum) const {
-    if (!requests[p].active) return;
+  EMF_HD bool operator()(int p, const NormalEquations6& sum) const {
+    if (!requests[p].active) return false;
     solves[p].advance(params, sum);
     requests[p] = request_of(solves[p]);
+    return requests[p].active != 0;
   }
 };
 
@@ -152,14 +155,8 @@ struct AdvanceSolve {
 
 /// The buffers of a batch's solves, kept between calls (any terms and norm
 /// of scalar S on backend B; one per batch that may run at a time).
-/// `checks_every` is how many
-/// iterations run between two looks of the host at whether every problem
-/// has stopped: 1 on the CPU, where looking costs nothing; more on a GPU,
-/// where an iteration queued after a problem stopped costs a few
-/// microseconds and a look costs a round trip.
 template <class S, Backend B>
 struct BatchedSolveWorkspace {
-  int checks_every = B::is_device ? 4 : 1;
   int segment_count = 0, total_terms = 0;  ///< of the batch laid out last
   /// The batch's problems (of its own type), term and segment offsets,
   /// requests and solver states, packed as words so that they go to the
@@ -170,6 +167,7 @@ struct BatchedSolveWorkspace {
   // These only grow (resizing a device vector waits for the device).
   typename B::template Vector<NormalEquations6> partials, sums;
   typename B::template Vector<TermValue<S>> values;
+  GroupedLoop loop;  ///< on a device, the graph of solve_batch's iterations
 
   /// Part `at` of `packed`, as values of type T.
   template <class T>
@@ -250,18 +248,17 @@ void lay_out(const B& backend, const std::vector<BatchedProblem<P, N>>& problems
   if (ws.sums.size() < problems.size()) ws.sums.resize(problems.size());
 }
 
-/// One term pass of the batch laid out in `ws` for its current requests,
-/// then finish(p, sum) for every problem (queued on a device).
-template <class S, Backend B, class P, class N, class Finish>
-void linearize_requests(const B& backend, bool keep_values, BatchedSolveWorkspace<S, B>& ws, Finish finish) {
-  const BatchedTerm<S, P, N> term{ws.template part<BatchedProblem<P, N>>(ws.at_problems),
-                                  ws.template part<LinearizationRequest<S>>(ws.at_requests),
-                                  ws.template part<int>(ws.at_first_term),
-                                  ws.groups.groups,
-                                  keep_values ? thrust::raw_pointer_cast(ws.values.data()) : nullptr,
-                                  ws.total_terms};
-  grouped_accumulate(backend, ws.groups, term, NormalEquations6::zero(), thrust::raw_pointer_cast(ws.partials.data()),
-                     finish);
+/// The term functor of the batch laid out in `ws`, for its current
+/// requests; keep_values: each problem's term values are stored and read
+/// (ws.values holds two slots).
+template <class S, Backend B, class P, class N>
+BatchedTerm<S, P, N> batch_terms(bool keep_values, BatchedSolveWorkspace<S, B>& ws) {
+  return {ws.template part<BatchedProblem<P, N>>(ws.at_problems),
+          ws.template part<LinearizationRequest<S>>(ws.at_requests),
+          ws.template part<int>(ws.at_first_term),
+          ws.groups.groups,
+          keep_values ? thrust::raw_pointer_cast(ws.values.data()) : nullptr,
+          ws.total_terms};
 }
 
 /// The first n values at `from` on the backend, on the host.
@@ -286,8 +283,9 @@ std::vector<NormalEquations6> linearize_batch(const B& backend, const std::vecto
   if (problems.empty()) return {};
   for (auto& q : requests) q.write_slot = q.read_slot = -1;
   detail::lay_out(backend, problems, requests, {}, ws);
-  detail::linearize_requests<S, B, P, N>(backend, false, ws,
-                                        detail::StoreSum{thrust::raw_pointer_cast(ws.sums.data())});
+  grouped_accumulate(backend, ws.groups, detail::batch_terms<S, B, P, N>(false, ws), NormalEquations6::zero(),
+                     thrust::raw_pointer_cast(ws.partials.data()),
+                     detail::StoreSum{thrust::raw_pointer_cast(ws.sums.data())});
   return detail::download(backend, thrust::raw_pointer_cast(ws.sums.data()), problems.size());
 }
 
@@ -329,16 +327,11 @@ std::vector<SE3<S>> solve_batch(const B& backend, const std::vector<BatchedProbl
   if (ws.values.size() < 2 * std::size_t(ws.total_terms)) ws.values.resize(2 * std::size_t(ws.total_terms));
   LevenbergMarquardtIteration<S>* on_backend = ws.template part<LevenbergMarquardtIteration<S>>(ws.at_solves);
   LinearizationRequest<S>* requested = ws.template part<LinearizationRequest<S>>(ws.at_requests);
-  const detail::AdvanceSolve<S> advance{on_backend, requested, params};
-  const int passes = params.max_iterations + 1;  // every pass advances every running solve once
-  const int every = std::max(1, ws.checks_every);
-  for (int pass = 0; pass < passes;) {
-    for (int k = 0; k < every && pass < passes; ++k, ++pass) {
-      detail::linearize_requests<S, B, P, N>(backend, true, ws, advance);
-    }
-    requests = detail::download(backend, requested, n);
-    if (std::none_of(requests.begin(), requests.end(), [](const auto& q) { return q.active != 0; })) break;
-  }
+  // Every pass advances every running solve once; the loop ends when none
+  // runs (on a device the device decides, without the host looking).
+  grouped_accumulate_while(backend, ws.loop, ws.groups, detail::batch_terms<S, B, P, N>(true, ws),
+                           NormalEquations6::zero(), thrust::raw_pointer_cast(ws.partials.data()),
+                           detail::AdvanceSolve<S>{on_backend, requested, params}, params.max_iterations + 1);
   solves = detail::download(backend, on_backend, n);
   std::vector<SE3<S>> solved(n);
   for (std::size_t p = 0; p < n; ++p) solved[p] = solves[p].pose.T_s, reports[p] = solves[p].report;
