@@ -164,3 +164,28 @@ TEMPLATE_LIST_TEST_CASE("LM's converged_step and refined(): fewer iterations, th
   CHECK(pose_error(from_solver, f.truth) < tol);
   CHECK(pose_error(from_refined, f.truth) < tol);
 }
+
+TEST_CASE("LM's cheap bound on the converged step is never below the step itself", "[solve]") {
+  // The solver takes the log of its pose only for steps under the bound, so
+  // a bound below step_norm_limit would stop solves later than before.
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<double> u(-1, 1), angle(0, 3.14159265358979);
+  const double pi = 3.14159265358979323846;
+  for (int i = 0; i < 20000; ++i) {
+    // Rotations up to and just below pi (where |V^-1| is largest), and
+    // translations from millimetres to 100 m.
+    Vec3<double> axis = normalized(vec3(u(rng), u(rng), u(rng)));
+    const double theta = i % 4 == 0 ? pi - 1e-7 * (1 + i % 7) : angle(rng);
+    const double scale = std::pow(10.0, 2 * u(rng) + (i % 3) - 1);
+    const Vec6<double> xi{{scale * u(rng), scale * u(rng), scale * u(rng), theta * axis[0], theta * axis[1],
+                           theta * axis[2]}};
+    const SE3<double> T = SE3<double>::exp(xi);
+    for (const double eps2 : {1e-8, 1e-6}) {
+      INFO("pose " << i << ", angle " << theta << ", |t| " << norm(T.translation()));
+      CHECK(detail::step_norm_limit(T, eps2) <= detail::step_norm_limit_bound(T, eps2));
+    }
+  }
+  // And the bound is not far above it where poses are: a metre, a quarter turn.
+  const SE3<double> T = SE3<double>::exp(Vec6<double>{{1, 0, 0, 0, 0, pi / 2}});
+  CHECK(detail::step_norm_limit_bound(T, 1e-6) < 4 * detail::step_norm_limit(T, 1e-6));
+}

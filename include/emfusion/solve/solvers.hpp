@@ -144,6 +144,13 @@ EMF_HD double step_norm_limit(const SE3<S>& T, double eps2) {
   const double x = norm(T.template cast<double>().log());
   return eps2 * (x + eps2);
 }
+/// At least step_norm_limit(T, eps2), without the logarithm (1 700 cycles
+/// on one GPU thread, in every iteration of a batched solve): xi(T) = (v, w)
+/// with |w| <= pi and v = V^-1 t, where |V^-1| = max(1, (theta / 2) /
+/// sin(theta / 2)) <= pi / 2; so |xi(T)| <= 3.15 + 1.6 |t|.
+EMF_HD inline double step_norm_limit_bound(const SE3<double>& T, double eps2) {
+  return eps2 * (3.15 + 1.6 * norm(T.translation()) + eps2);
+}
 /// True if applying a step left the pose unchanged in S: the step is below
 /// what the scalar resolves (in float long before eps2 is reached).
 template <class S>
@@ -202,7 +209,10 @@ struct LevenbergMarquardtIteration {
   NormalEquations6 n;          ///< the linearisation at `pose`
   Vec6<double> xi;             ///< the step from pose to next
   double mu = 0, nu = 0;
-  double step_limit = 0;  ///< detail::step_norm_limit at `pose` (a log of the pose: kept, not redone each step)
+  /// detail::step_norm_limit at `pose` once a step was short enough to need
+  /// it (below step_norm_limit_bound), -1 before: a log of the pose, taken
+  /// only near convergence.
+  double step_limit = -1;
   SolveReport report;
   bool started = false;  ///< the linearisation at the start was taken
   bool done = false;
@@ -228,7 +238,6 @@ struct LevenbergMarquardtIteration {
       if (!detail::start(n, p.min_terms, report)) return finish();
       mu = p.tau * detail::max_diagonal(n);
       nu = p.nu;
-      step_limit = detail::step_norm_limit(pose.T, p.eps2);
       report.reason = StopReason::max_iterations;
       return propose(p);
     }
@@ -244,7 +253,7 @@ struct LevenbergMarquardtIteration {
     if (rho > 0) {
       pose = next;
       n = at_target;
-      step_limit = detail::step_norm_limit(pose.T, p.eps2);
+      step_limit = -1;
       ++report.accepted_steps;
       const double a = 2 * rho - 1;
       const double shrink = 1.0 - a * a * a;
@@ -268,8 +277,12 @@ struct LevenbergMarquardtIteration {
         norm(xi) <= p.converged_step)
       return finish(StopReason::step_small);
     if (!solve_damped(n, mu, xi)) return finish(StopReason::singular);
-    if (norm(xi) <= step_limit || !pose.step(xi, next))
-      return finish(StopReason::step_small);
+    const double step = norm(xi);
+    if (step <= detail::step_norm_limit_bound(pose.T, p.eps2)) {
+      if (step_limit < 0) step_limit = detail::step_norm_limit(pose.T, p.eps2);
+      if (step <= step_limit) return finish(StopReason::step_small);
+    }
+    if (!pose.step(xi, next)) return finish(StopReason::step_small);
     return true;
   }
   EMF_HD bool finish() {
