@@ -152,6 +152,7 @@ TEMPLATE_LIST_TEST_CASE("grouped_accumulate sums every group of segments once an
   }
 }
 
+namespace {
 /// grouped_accumulate_while's last step: StoreGroup's, and another pass
 /// until group g has been finished stop_after + 2 g times.
 struct StoreGroupUntil {
@@ -162,6 +163,7 @@ struct StoreGroupUntil {
     return store.calls[g] < stop_after + 2 * g;
   }
 };
+}  // namespace
 
 TEMPLATE_LIST_TEST_CASE("grouped_accumulate_while repeats passes while a group asks, up to its limit", "[solve]",
                         emfusion::test::AllConfigs) {
