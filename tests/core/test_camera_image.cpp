@@ -39,7 +39,48 @@ struct Square {
 struct Plus {
   EMF_HD double operator()(double a, double b) const { return a + b; }
 };
+
+/// p[i] = value; p[i] *= factor; p[i] read as a double (the lanes' test).
+struct SetTo {
+  float* p;
+  float value;
+  EMF_HD void operator()(int i) const { p[i] = value; }
+};
+struct ScaleBy {
+  float* p;
+  float factor;
+  EMF_HD void operator()(int i) const { p[i] *= factor; }
+};
+struct ReadAt {
+  const float* p;
+  EMF_HD double operator()(int i) const { return double(p[i]); }
+};
 }  // namespace
+
+TEMPLATE_LIST_TEST_CASE("Work on lanes between fork and join follows the base queue and precedes what comes after",
+                        "[core]", emfusion::test::AllConfigs) {
+  using B = typename TestType::Backend;
+  const B backend{};
+  ConcurrentLanes<B> lanes;
+  const int n = 1 << 18, count = 4;
+  typename B::template Vector<float> data(std::size_t(n) * count, 0.0f);
+  float* p = thrust::raw_pointer_cast(data.data());
+  for (int round = 1; round <= 3; ++round) {
+    // The base queue sets every value; each lane scales its quarter; the
+    // base queue sums. Out of order, a lane would scale old values or the
+    // sum would read unscaled ones.
+    for_each_index(backend, n * count, SetTo{p, float(round)});
+    lanes.fork(backend, std::size_t(count));
+    for (int k = 0; k < count; ++k)
+      for_each_index(lanes.lane(std::size_t(k), backend), n, ScaleBy{p + std::size_t(k) * n, float(k + 2)});
+    lanes.join(backend, std::size_t(count));
+    const double sum = transform_reduce_index(backend, n * count, ReadAt{p}, 0.0, Plus{});
+    double expected = 0;
+    for (int k = 0; k < count; ++k) expected += double(n) * round * (k + 2);
+    INFO("round " << round);
+    CHECK(sum == expected);
+  }
+}
 
 TEMPLATE_LIST_TEST_CASE("Camera back-projection and projection are inverse", "[core]", emfusion::test::AllConfigs) {
   using S = typename TestType::Scalar;

@@ -233,16 +233,22 @@ ScratchFor<B> make_scratch(const B& backend) {
     return ScratchFor<B>{backend.stream};
 }
 
-/// Independent queues of work on a backend, for solves that may run at the
-/// same time from several host threads (the system's objects). On the CPU
-/// there are none (`concurrent` is false: work runs one solve after another,
-/// each parallel inside); on CUDA, lane k is a stream of its own, created on
-/// first use and destroyed with the set.
+/// Independent queues of work on a backend, for work that may run at the
+/// same time: solves from several host threads, or the objects' ray casts
+/// queued one after another from one thread (fork, queue on the lanes,
+/// join). On the CPU there are none (`concurrent` is false: work runs one
+/// piece after another, each parallel inside, and fork and join do
+/// nothing); on CUDA, lane k is a stream of its own, created on first use
+/// and destroyed with the set.
 template <class B>
 class ConcurrentLanes {
  public:
   static constexpr bool concurrent = false;
   B lane(std::size_t, const B& base) { return base; }
+  /// Lanes 0..count-1 start after the work queued on `base` so far.
+  void fork(const B&, std::size_t) {}
+  /// Work queued on `base` from now on starts after lanes 0..count-1's.
+  void join(const B&, std::size_t) {}
 };
 
 #if EMFUSION_HAS_CUDA
@@ -253,13 +259,18 @@ class ConcurrentLanes<Cuda> {
   ConcurrentLanes() = default;
   ConcurrentLanes(const ConcurrentLanes&) = delete;
   ConcurrentLanes& operator=(const ConcurrentLanes&) = delete;
-  ConcurrentLanes(ConcurrentLanes&& o) noexcept : streams_(std::move(o.streams_)) { o.streams_.clear(); }
+  ConcurrentLanes(ConcurrentLanes&& o) noexcept : streams_(std::move(o.streams_)), events_(std::move(o.events_)) {
+    o.streams_.clear(), o.events_.clear();
+  }
   ConcurrentLanes& operator=(ConcurrentLanes&& o) noexcept {
     std::swap(streams_, o.streams_);
+    std::swap(events_, o.events_);
     return *this;
   }
   ~ConcurrentLanes() {
-    for (cudaStream_t s : streams_) cudaStreamDestroy(s);  // errors at teardown have nowhere to go
+    // Errors at teardown have nowhere to go.
+    for (cudaStream_t s : streams_) cudaStreamDestroy(s);
+    for (cudaEvent_t e : events_) cudaEventDestroy(e);
   }
   /// Lane k: a blocking stream, so it also orders itself after the legacy
   /// default stream's work.
@@ -271,9 +282,37 @@ class ConcurrentLanes<Cuda> {
     }
     return Cuda{streams_[k]};
   }
+  /// Lanes 0..count-1 start after the work queued on `base` so far.
+  void fork(const Cuda& base, std::size_t count) {
+    if (count == 0) return;
+    lane(count - 1, base);
+    cudaEvent_t e = event(0);
+    detail::check_cuda(cudaEventRecord(e, base.stream), "ConcurrentLanes::fork: cudaEventRecord");
+    for (std::size_t k = 0; k < count; ++k)
+      detail::check_cuda(cudaStreamWaitEvent(streams_[k], e, 0), "ConcurrentLanes::fork: cudaStreamWaitEvent");
+  }
+  /// Work queued on `base` from now on starts after lanes 0..count-1's.
+  void join(const Cuda& base, std::size_t count) {
+    for (std::size_t k = 0; k < count && k < streams_.size(); ++k) {
+      cudaEvent_t e = event(k + 1);
+      detail::check_cuda(cudaEventRecord(e, streams_[k]), "ConcurrentLanes::join: cudaEventRecord");
+      detail::check_cuda(cudaStreamWaitEvent(base.stream, e, 0), "ConcurrentLanes::join: cudaStreamWaitEvent");
+    }
+  }
 
  private:
+  /// Event i (0: the fork's; k + 1: lane k's join), created on first use.
+  cudaEvent_t event(std::size_t i) {
+    while (events_.size() <= i) {
+      cudaEvent_t e = nullptr;
+      detail::check_cuda(cudaEventCreateWithFlags(&e, cudaEventDisableTiming), "ConcurrentLanes: cudaEventCreate");
+      events_.push_back(e);
+    }
+    return events_[i];
+  }
+
   std::vector<cudaStream_t> streams_;
+  std::vector<cudaEvent_t> events_;
 };
 #endif
 

@@ -22,17 +22,30 @@
 
 namespace emfusion {
 
+/// What integrating the objects keeps between frames: a workspace each
+/// and, on a GPU, a stream each, so that the objects integrate at once
+/// (one after another, each object's volume of 64^3-128^3 voxels left most
+/// of the GPU idle: 0.037 ms a frame per object, H100).
+template <class S, Backend B>
+struct ObjectIntegrationWorkspace {
+  std::vector<IntegrationWorkspace<S, B>> objects;
+  ConcurrentLanes<B> lanes;
+};
+
 /// Integrates frame.depth at map.T_world_camera into every model (eq. 10):
 /// model k with weights frame.associations.image(k), the last fresh.size()
 /// objects (added by detection handling) with their first-view weights.
 /// `first`: the frame that starts the map, which has no association images;
 /// the background then takes every pixel with weight 1. The workspaces
-/// (optional) keep the buffers of a dense and of a sparse background.
+/// (optional) keep the buffers of a dense and of a sparse background, and
+/// `objects_workspace` those of the objects, which then integrate at once
+/// (without it, one after another through `workspace`).
 template <class S, Backend B>
 void integrate_models(Map<S, B>& map, const Frame<S, B>& frame, const PinholeCamera<S>& camera,
                       const SystemParams<S>& params, const std::vector<NewObjectWeights<S, B>>& fresh, bool first,
                       IntegrationWorkspace<S, B>* workspace = nullptr,
-                      SparseIntegrationWorkspace<S, B>* sparse_workspace = nullptr) {
+                      SparseIntegrationWorkspace<S, B>* sparse_workspace = nullptr,
+                      ObjectIntegrationWorkspace<S, B>* objects_workspace = nullptr) {
   const std::size_t old_objects = map.objects.size() - fresh.size();
   const Image<S, B>* background_weights = first ? nullptr : &frame.associations.image(0);
   map.background.visit([&](auto& background) {
@@ -43,12 +56,25 @@ void integrate_models(Map<S, B>& map, const Frame<S, B>& frame, const PinholeCam
       integrate(background, frame.depth, camera, map.T_world_camera, background_weights,
                 params.background_integration, workspace);
   });
-  for (std::size_t k = 0; k < map.objects.size(); ++k) {
+  const std::size_t n = map.objects.size();
+  const B& backend = frame.depth.backend();
+  if (objects_workspace) {
+    if (objects_workspace->objects.size() < n) objects_workspace->objects.resize(n);
+    objects_workspace->lanes.fork(backend, n);
+  }
+  for (std::size_t k = 0; k < n; ++k) {
     const Image<S, B>* weights =
         k < old_objects ? &frame.associations.image(int(k) + 1) : &fresh[k - old_objects].weights;
-    integrate(map.objects[k]->volume(), frame.depth, camera, map.T_world_camera, weights, params.object_integration,
-              workspace);
+    if (objects_workspace) {
+      const B lane = objects_workspace->lanes.lane(k, backend);
+      integrate(map.objects[k]->volume(), frame.depth, camera, map.T_world_camera, weights, params.object_integration,
+                &objects_workspace->objects[k], &lane);
+    } else {
+      integrate(map.objects[k]->volume(), frame.depth, camera, map.T_world_camera, weights, params.object_integration,
+                workspace);
+    }
   }
+  if (objects_workspace) objects_workspace->lanes.join(backend, n);
 }
 
 /// Eq. 6 for every object detection d matched (`object_of[d]`) or created

@@ -24,6 +24,7 @@ struct RenderWorkspace {
   Image<S, B> object_depth;        ///< the nearest object surface per pixel
   Image<S, B> background_ray_end;  ///< where the background's rays stop
   RaycastResult<S, B> background;  ///< the background's rendering, where objects were drawn
+  ConcurrentLanes<B> lanes;        ///< on a GPU, the objects' casts run at once, one stream each
 };
 
 namespace detail::rendering {
@@ -98,12 +99,25 @@ void render_models(Map<S, B>& map, Frame<S, B>& frame, const PinholeCamera<S>& c
   // only up to the depth where it would lose.
   ws.object_depth.fill(S(0));
   frame.segmentation.fill(-1);
-  for (std::size_t k = 0; k < map.objects.size(); ++k) {
+  // The objects' casts are independent, each a few thousand rays marching
+  // through a small volume, too few to fill a GPU: on CUDA each goes on a
+  // stream of its own (one after another they added 0.09 ms a frame per
+  // object, H100). Their renderings are then merged in object order.
+  const std::size_t n = map.objects.size();
+  ws.lanes.fork(backend, n);
+  for (std::size_t k = 0; k < n; ++k) {
     ObjectModel<S, B>& o = *map.objects[k];
     if (params.ignores(o.class_name())) continue;
-    raycast(o.volume(), camera, map.T_world_camera, o.rendering(), rp, &o.foreground());
+    const B lane = ws.lanes.lane(k, backend);
+    raycast(o.volume(), camera, map.T_world_camera, o.rendering(), rp, &std::as_const(o.foreground()),
+            static_cast<const Image<S, B>*>(nullptr), &lane);
+  }
+  ws.lanes.join(backend, n);
+  for (std::size_t k = 0; k < n; ++k) {
+    const ObjectModel<S, B>& o = *map.objects[k];
+    if (params.ignores(o.class_name())) continue;
     for_each_index(backend, w * h,
-                   detail::rendering::NearestObject<S>{std::as_const(o).rendering().depth.view(),
+                   detail::rendering::NearestObject<S>{o.rendering().depth.view(),
                                                        ws.object_depth.view(), frame.segmentation.view(),
                                                        int(k) + 1});
   }

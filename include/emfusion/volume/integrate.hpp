@@ -436,14 +436,19 @@ VoxelUpdate<S> prepare_voxel_update(const Image<S, B>& depth, const PinholeCamer
 /// into `volume`. `weights`, if non-empty, gives q(u) per pixel and must have
 /// the depth image's size. Runs on the volume's backend; the images must live
 /// there too. `workspace` (optional) keeps the derived images' memory.
+/// With `run_on`, the work is queued there (a lane of ConcurrentLanes, so
+/// that several objects integrate at once; each then needs a workspace of
+/// its own) instead of on the volume's backend.
 template <class S, Backend B, class Store>
 void integrate(TsdfVolume<S, B, Store>& volume, const Image<S, B>& depth, const PinholeCamera<S>& camera,
                const SE3<S>& T_world_camera, const Image<S, B>* weights = nullptr,
-               const IntegrationParams<S>& params = {}, IntegrationWorkspace<S, B>* workspace = nullptr) {
+               const IntegrationParams<S>& params = {}, IntegrationWorkspace<S, B>* workspace = nullptr,
+               const B* run_on = nullptr) {
   IntegrationWorkspace<S, B> local;
+  const B& backend = run_on ? *run_on : volume.backend();
   const SE3<S> T_camera_volume = T_world_camera.inverse() * volume.pose();
   const detail::VoxelUpdate<S> update = detail::prepare_voxel_update(
-      depth, camera, weights, params, volume.voxel_size(), volume.truncation(), volume.backend(),
+      depth, camera, weights, params, volume.voxel_size(), volume.truncation(), backend,
       workspace ? *workspace : local, "integrate",
       projected_box(camera, T_camera_volume, Vec3<S>::zero(), volume.view().extent()));
   const int nz = volume.dims()[2];
@@ -459,7 +464,7 @@ void integrate(TsdfVolume<S, B, Store>& volume, const Image<S, B>& depth, const 
   // A thread a run: fewer than 2^31 of them for volumes below 2^34 voxels
   // (64 GiB even in half storage).
   const int runs = (nz + z_run - 1) / z_run;
-  for_each_index(volume.backend(), volume.dims()[0] * volume.dims()[1] * runs, f);
+  for_each_index(backend, volume.dims()[0] * volume.dims()[1] * runs, f);
 }
 
 }  // namespace emfusion

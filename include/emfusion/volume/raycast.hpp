@@ -450,12 +450,15 @@ struct RaycastPixel {
 /// only), only surfaces with p_fg > min_foreground. With `ray_end` (an image
 /// of the camera's size), rays are cast only where it is positive, and end at
 /// that depth: a pixel's first crossing before it or a miss (a question such
-/// as "is the surface in front of this depth?").
+/// as "is the surface in front of this depth?"). With `run_on`, the cast is
+/// queued there (a lane of ConcurrentLanes, so that several objects' casts
+/// run at once) instead of on the volume's backend.
 template <class Volume, class S, Backend B>
   requires TsdfVolumeType<Volume, S> && std::same_as<typename Volume::backend_type, B>
 void raycast(const Volume& volume, const PinholeCamera<S>& camera, const SE3<S>& T_world_camera,
              RaycastResult<S, B>& out, const RaycastParams<S>& params = {},
-             const ForegroundCounts<S, B>* foreground = nullptr, const Image<S, B>* ray_end = nullptr) {
+             const ForegroundCounts<S, B>* foreground = nullptr, const Image<S, B>* ray_end = nullptr,
+             const B* run_on = nullptr) {
   camera.validate("raycast");
   detail::require(params.min_depth >= S(0) && params.max_depth > params.min_depth, "raycast",
                   "need 0 <= min_depth < max_depth");
@@ -483,7 +486,7 @@ void raycast(const Volume& volume, const PinholeCamera<S>& camera, const SE3<S>&
   // CPU the reverse: cleared images and the box's pixels only (raycast 78
   // against 88 ms per frame on 2 cores).
   if constexpr (B::is_device) {
-    for_each_index(volume.backend(), camera.width * camera.height, f);
+    for_each_index(run_on ? *run_on : volume.backend(), camera.width * camera.height, f);
   } else {
     if (f.pixels.area() < camera.pixel_count()) {
       const S nan = std::numeric_limits<S>::quiet_NaN();
@@ -494,7 +497,7 @@ void raycast(const Volume& volume, const PinholeCamera<S>& camera, const SE3<S>&
         out.normals.fill(Vec3<S>::constant(nan));
       }
     }
-    for_each_pixel_in(volume.backend(), f.pixels, camera.width, f);
+    for_each_pixel_in(run_on ? *run_on : volume.backend(), f.pixels, camera.width, f);
   }
 }
 
