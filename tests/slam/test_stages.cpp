@@ -9,6 +9,7 @@
 // likelihood, a norm and a solver defined here, as a user would.
 #include <cmath>
 #include <cstdint>
+#include <random>
 #include <string>
 #include <utility>
 #include <vector>
@@ -702,4 +703,46 @@ TEMPLATE_LIST_TEST_CASE("Stages alone: tracking from a motion prediction, the re
   const std::vector<PoseStarts<S>> none = predict_objects(m.map, 0.2, params);
   CHECK_FALSE(none[0].predicted);
   CHECK(apart(object.pose().translation(), P1.template cast<S>().translation()) == 0);
+}
+
+TEMPLATE_LIST_TEST_CASE("Every object's pixel counts in one pass equal each object's own reduction", "[slam]",
+                        emfusion::test::AllConfigs) {
+  using S = typename TestType::Scalar;
+  using B = typename TestType::Backend;
+  const B backend{};
+  // Random labels (-1 nothing, 0 background, k + 1 object k) and association
+  // images, some values 0, some above 1/2; the last object has no image (it
+  // was created after the E-step).
+  const int w = 64, h = 48, objects = 5;
+  std::mt19937 rng(5);
+  std::uniform_int_distribution<int> label(-1, objects);
+  std::uniform_real_distribution<double> u(0, 1);
+  std::vector<int> labels(std::size_t(w * h));
+  for (int& l : labels) l = label(rng);
+  Frame<S, B> frame;
+  frame.segmentation = Image<int, Host>::from_host(w, h, labels).template to<B>();
+  frame.associations.resize(objects, w, h, backend);
+  for (int k = 0; k < objects; ++k) {
+    std::vector<S> q(std::size_t(w * h));
+    for (S& v : q) v = u(rng) < 0.3 ? S(0) : S(u(rng));
+    frame.associations.image(k) = Image<S, Host>::from_host(w, h, q).template to<B>();
+  }
+  ObjectPixelsWorkspace<S, B> ws;
+  for (const int count : {objects, 2, objects}) {  // the workspace reused, for fewer and more objects
+    for (const int border : {0, 5}) {
+      const std::vector<ObjectPixels> all = all_object_pixels(frame, count, border, ws);
+      REQUIRE(all.size() == std::size_t(count));
+      for (int k = 0; k < count; ++k) {
+        const ObjectPixels one = object_pixels(frame, k, border);
+        INFO(count << " objects, border " << border << ", object " << k);
+        CHECK(all[std::size_t(k)].rendered == one.rendered);
+        CHECK(all[std::size_t(k)].rendered_inner == one.rendered_inner);
+        CHECK(all[std::size_t(k)].associated_inner == one.associated_inner);
+        CHECK(all[std::size_t(k)].association_sum == Approx(one.association_sum).epsilon(1e-12));
+        CHECK(one.rendered > 0);
+        CHECK((k == objects - 1) == (one.associated_inner == 0));
+      }
+    }
+  }
+  CHECK(all_object_pixels(frame, 0, 0, ws).empty());
 }

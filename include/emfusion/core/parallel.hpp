@@ -10,6 +10,7 @@
 #include <concepts>
 #include <cstdint>
 #include <type_traits>
+#include <vector>
 
 #if defined(_OPENMP)
 #include <omp.h>
@@ -270,6 +271,35 @@ bool grouped_accumulate_on_host(const B& backend, const SegmentGroups& layout, c
   return again;
 }
 }  // namespace detail
+
+/// The layout of grouped_accumulate for `groups` groups of the same `n`
+/// indices each (group g's index i is g n + i), each group cut into
+/// `segments` segments of about n / segments: one pass that reduces the same
+/// range once per group (the deletion rules' pixel counts of every object).
+/// The arrays live in `storage` on the backend (resized as needed; the
+/// counters start at zero).
+template <Backend B>
+SegmentGroups equal_groups(const B& backend, int groups, int n, int segments,
+                           typename B::template Vector<int>& storage) {
+  segments = std::max(1, std::min(segments, std::max(n, 1)));
+  const int total = groups * segments;
+  std::vector<int> words;  // offsets, first_segment, group_of, counters
+  words.reserve(std::size_t(3 * total + 2 * groups + 2));
+  for (int g = 0; g < groups; ++g)
+    for (int j = 0; j < segments; ++j)
+      words.push_back(g * n + int(std::int64_t(j) * n / segments));
+  words.push_back(groups * n);
+  for (int g = 0; g <= groups; ++g) words.push_back(g * segments);
+  for (int g = 0; g < groups; ++g)
+    for (int j = 0; j < segments; ++j) words.push_back(g);
+  words.insert(words.end(), std::size_t(groups), 0);
+  if (storage.size() < words.size()) storage.resize(words.size());
+  int* on_backend = thrust::raw_pointer_cast(storage.data());
+  copy_to_backend(backend, words.data(), words.size(), on_backend);
+  static_assert(sizeof(unsigned) == sizeof(int), "the counters share the layout's words");
+  return SegmentGroups{total, groups, on_backend, on_backend + total + 1, on_backend + total + groups + 2,
+                       reinterpret_cast<unsigned*>(on_backend + 2 * total + groups + 2)};
+}
 
 /// For every group g of segments (SegmentGroups), calls finish(g, sum) with
 /// the sum of the contributions f(i, acc) (as accumulate_index) of every

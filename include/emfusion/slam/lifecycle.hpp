@@ -65,7 +65,51 @@ struct AddObjectPixels {
   EMF_HD ObjectPixels operator()(const ObjectPixels& a, const ObjectPixels& b) const { return a + b; }
 };
 
+/// ObjectPixels as four doubles (counts below 2^53 are exact), the form
+/// grouped_accumulate sums.
+struct PixelSums {
+  static constexpr int components = 4;
+  double v[components] = {0, 0, 0, 0};
+  EMF_HD double& component(int c) { return v[c]; }
+  EMF_HD double component(int c) const { return v[c]; }
+  EMF_HD PixelSums& operator+=(const PixelSums& o) {
+    for (int c = 0; c < components; ++c) v[c] += o.v[c];
+    return *this;
+  }
+  ObjectPixels counts() const {
+    return {v[0], int(v[1]), int(v[2]), int(v[3])};
+  }
+};
+
+/// Index g n + i: pixel i's part of object g's counts (n pixels a frame).
+template <class S>
+struct AddObjectPixel {
+  ImageView<const int> label;
+  const ImageView<const S>* associations;  ///< object g's image, or an empty view
+  int pixels, border;
+  EMF_HD void operator()(int index, PixelSums& acc) const {
+    const int g = index / pixels;
+    const ObjectPixels p = CountObjectPixels<S>{label, associations[g], g + 1, border}(index - g * pixels);
+    acc.v[0] += p.association_sum;
+    acc.v[1] += double(p.rendered), acc.v[2] += double(p.rendered_inner), acc.v[3] += double(p.associated_inner);
+  }
+};
+
+struct StorePixelSums {
+  PixelSums* out;
+  EMF_HD void operator()(int g, const PixelSums& sum) const { out[g] = sum; }
+};
+
 }  // namespace detail::lifecycle
+
+/// What counting every object's pixels keeps between frames (the pass's
+/// layout, the association views and the sums, on the backend).
+template <class S, Backend B>
+struct ObjectPixelsWorkspace {
+  typename B::template Vector<int> layout;
+  typename B::template Vector<ImageView<const S>> associations;
+  typename B::template Vector<detail::lifecycle::PixelSums> partials, sums;
+};
 
 /// Hands free heap memory back to the system. glibc keeps freed blocks
 /// below its dynamic mmap threshold (which rises to the size of the largest
@@ -88,13 +132,47 @@ ObjectPixels object_pixels(const Frame<S, B>& frame, int k, int border) {
                                 ObjectPixels{}, detail::lifecycle::AddObjectPixels{});
 }
 
+/// object_pixels of Map::objects[0..count-1], in one pass over the frame
+/// on the backend and one copy: one after another, each object's reduction
+/// and its copy to the host added 0.03 ms a frame per object on a GPU
+/// (H100, bench_system --objects 1 to 16).
+template <class S, Backend B>
+std::vector<ObjectPixels> all_object_pixels(const Frame<S, B>& frame, int count, int border,
+                                            ObjectPixelsWorkspace<S, B>& ws) {
+  if (count <= 0) return {};
+  const B& backend = frame.segmentation.backend();
+  const Associations<S, B>& q = frame.associations;
+  std::vector<ImageView<const S>> views;
+  for (int k = 0; k < count; ++k)
+    views.push_back(k + 1 < q.model_count() ? q.image(k + 1).view() : ImageView<const S>{});
+  if (ws.associations.size() < views.size()) ws.associations.resize(views.size());
+  copy_to_backend(backend, views.data(), views.size(), thrust::raw_pointer_cast(ws.associations.data()));
+  const int n = frame.segmentation.size();
+  const int segments = std::max(1, std::min(64, n / 4096));  // as accumulate_index's chunks on the CPU
+  const SegmentGroups layout = equal_groups(backend, count, n, segments, ws.layout);
+  if (ws.partials.size() < std::size_t(layout.segments)) ws.partials.resize(std::size_t(layout.segments));
+  if (ws.sums.size() < std::size_t(count)) ws.sums.resize(std::size_t(count));
+  grouped_accumulate(backend, layout,
+                     detail::lifecycle::AddObjectPixel<S>{frame.segmentation.view(),
+                                                          thrust::raw_pointer_cast(ws.associations.data()), n, border},
+                     detail::lifecycle::PixelSums{}, thrust::raw_pointer_cast(ws.partials.data()),
+                     detail::lifecycle::StorePixelSums{thrust::raw_pointer_cast(ws.sums.data())});
+  std::vector<detail::lifecycle::PixelSums> sums(static_cast<std::size_t>(count));
+  copy_to_host(backend, thrust::raw_pointer_cast(ws.sums.data()), sums.size(), sums.data());
+  std::vector<ObjectPixels> out;
+  for (const auto& sum : sums) out.push_back(sum.counts());
+  return out;
+}
+
 /// What tracking did with Map::objects[k] this frame and what the deletion
 /// rules see of it (`associated`: the association images are this frame's).
+/// `pixels`: its object_pixels, when already counted (all_object_pixels).
 template <class S, Backend B>
 ObjectStatus object_status(const Map<S, B>& map, const Frame<S, B>& frame, int k, bool associated,
-                           const SystemParams<S>& params) {
+                           const SystemParams<S>& params, const ObjectPixels* pixels = nullptr) {
   const ObjectModel<S, B>& o = *map.objects[std::size_t(k)];
-  const ObjectPixels px = object_pixels(frame, k, params.visibility_border_for(frame.segmentation.width()));
+  const ObjectPixels px =
+      pixels ? *pixels : object_pixels(frame, k, params.visibility_border_for(frame.segmentation.width()));
   ObjectStatus status;
   status.id = o.id();
   if (std::size_t(k) < frame.object_tracks.size()) {
@@ -124,10 +202,16 @@ ObjectStatus object_status(const Map<S, B>& map, const Frame<S, B>& frame, int k
 /// beyond lost_object_frames and max_lost_objects, and renews the grace of
 /// young objects on detector frames. `tracked`: tracking ran this frame, so
 /// association images exist for every object that existed before it.
+/// `workspace` (optional) keeps the buffers of the objects' pixel counts.
 template <class S, Backend B>
 void delete_objects(Map<S, B>& map, const Frame<S, B>& frame, const SystemParams<S>& params, FrameResult& result,
-                    bool detector_frame, int created, bool tracked) {
+                    bool detector_frame, int created, bool tracked,
+                    ObjectPixelsWorkspace<S, B>* workspace = nullptr) {
   const int old_objects = int(map.objects.size()) - created;
+  ObjectPixelsWorkspace<S, B> local;
+  const std::vector<ObjectPixels> pixels =
+      all_object_pixels(frame, old_objects, params.visibility_border_for(frame.segmentation.width()),
+                        workspace ? *workspace : local);
   const int min_pixels = params.keep_mask_pixels_for(frame.segmentation.width(), frame.segmentation.height());
   // Grace lasts until the object is first seen or the detector runs again.
   if (detector_frame) map.young.clear();
@@ -136,7 +220,7 @@ void delete_objects(Map<S, B>& map, const Frame<S, B>& frame, const SystemParams
   const bool associated = params.use_association && tracked;
   for (int k = 0; k < old_objects; ++k) {
     const ObjectModel<S, B>& o = *map.objects[std::size_t(k)];
-    ObjectStatus status = object_status(map, frame, k, associated, params);
+    ObjectStatus status = object_status(map, frame, k, associated, params, &pixels[std::size_t(k)]);
     const bool visible = status.visible_pixels >= min_pixels;
     if (detector_frame && o.existence_probability() < params.min_existence)
       why[std::size_t(k)] = DeletionReason::existence;

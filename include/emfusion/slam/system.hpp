@@ -147,7 +147,7 @@ class System {
     result.times.detections = clock.lap();
 
     integrate_models(map_, frame_, camera_, params_, update.fresh, starts_map, &integration_workspace_,
-                     &sparse_workspace_);
+                     &sparse_workspace_, &object_integration_workspace_);
     map_.started = true;
     result.times.integrate = clock.lap();
     if (det) update_foreground_counts(map_, frame_, *det, seg, update.object_of_detection, update.fresh, camera_);
@@ -159,7 +159,8 @@ class System {
     std::vector<int> ids_drawn;  // the objects the segmentation was rendered with (for merging)
     if (det)
       for (const auto& o : map_.objects) ids_drawn.push_back(o->id());
-    delete_objects(map_, frame_, params_, result, det != nullptr, int(update.fresh.size()), !starts_map);
+    delete_objects(map_, frame_, params_, result, det != nullptr, int(update.fresh.size()), !starts_map,
+                   &object_pixels_workspace_);
     // Two models of one object (merge_min_inliers; 0 turns it off).
     if (det)
       result.merged = merge_objects(map_, frame_, *det, seg, update.object_of_detection, ids_drawn, camera_, params_,
@@ -277,6 +278,8 @@ class System {
   TrackingWorkspace<S, B> tracking_workspace_;
   RenderWorkspace<S, B> render_workspace_;
   IntegrationWorkspace<S, B> integration_workspace_;
+  ObjectIntegrationWorkspace<S, B> object_integration_workspace_;
+  ObjectPixelsWorkspace<S, B> object_pixels_workspace_;
   SparseIntegrationWorkspace<S, B> sparse_workspace_;
 };
 
