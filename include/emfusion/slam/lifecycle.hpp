@@ -81,35 +81,23 @@ struct PixelSums {
   }
 };
 
-/// Index g n + i: pixel i's part of object g's counts (n pixels a frame).
+/// Pixel i's part of object g's counts (its association image `q`).
 template <class S>
 struct AddObjectPixel {
   ImageView<const int> label;
-  const ImageView<const S>* associations;  ///< object g's image, or an empty view
-  int pixels, border;
-  EMF_HD void operator()(int index, PixelSums& acc) const {
-    const int g = index / pixels;
-    const ObjectPixels p = CountObjectPixels<S>{label, associations[g], g + 1, border}(index - g * pixels);
+  int border;
+  EMF_HD void operator()(int g, const ImageView<const S>& q, int i, PixelSums& acc) const {
+    const ObjectPixels p = CountObjectPixels<S>{label, q, g + 1, border}(i);
     acc.v[0] += p.association_sum;
     acc.v[1] += double(p.rendered), acc.v[2] += double(p.rendered_inner), acc.v[3] += double(p.associated_inner);
   }
 };
 
-struct StorePixelSums {
-  PixelSums* out;
-  EMF_HD void operator()(int g, const PixelSums& sum) const { out[g] = sum; }
-};
-
 }  // namespace detail::lifecycle
 
-/// What counting every object's pixels keeps between frames (the pass's
-/// layout, the association views and the sums, on the backend).
+/// What counting every object's pixels keeps between frames.
 template <class S, Backend B>
-struct ObjectPixelsWorkspace {
-  typename B::template Vector<int> layout;
-  typename B::template Vector<ImageView<const S>> associations;
-  typename B::template Vector<detail::lifecycle::PixelSums> partials, sums;
-};
+using ObjectPixelsWorkspace = PerGroupWorkspace<ImageView<const S>, detail::lifecycle::PixelSums, B>;
 
 /// Hands free heap memory back to the system. glibc keeps freed blocks
 /// below its dynamic mmap threshold (which rises to the size of the largest
@@ -139,28 +127,15 @@ ObjectPixels object_pixels(const Frame<S, B>& frame, int k, int border) {
 template <class S, Backend B>
 std::vector<ObjectPixels> all_object_pixels(const Frame<S, B>& frame, int count, int border,
                                             ObjectPixelsWorkspace<S, B>& ws) {
-  if (count <= 0) return {};
-  const B& backend = frame.segmentation.backend();
   const Associations<S, B>& q = frame.associations;
-  std::vector<ImageView<const S>> views;
+  std::vector<ImageView<const S>> images;
   for (int k = 0; k < count; ++k)
-    views.push_back(k + 1 < q.model_count() ? q.image(k + 1).view() : ImageView<const S>{});
-  if (ws.associations.size() < views.size()) ws.associations.resize(views.size());
-  copy_to_backend(backend, views.data(), views.size(), thrust::raw_pointer_cast(ws.associations.data()));
-  const int n = frame.segmentation.size();
-  const int segments = std::max(1, std::min(64, n / 4096));  // as accumulate_index's chunks on the CPU
-  const SegmentGroups layout = equal_groups(backend, count, n, segments, ws.layout);
-  if (ws.partials.size() < std::size_t(layout.segments)) ws.partials.resize(std::size_t(layout.segments));
-  if (ws.sums.size() < std::size_t(count)) ws.sums.resize(std::size_t(count));
-  grouped_accumulate(backend, layout,
-                     detail::lifecycle::AddObjectPixel<S>{frame.segmentation.view(),
-                                                          thrust::raw_pointer_cast(ws.associations.data()), n, border},
-                     detail::lifecycle::PixelSums{}, thrust::raw_pointer_cast(ws.partials.data()),
-                     detail::lifecycle::StorePixelSums{thrust::raw_pointer_cast(ws.sums.data())});
-  std::vector<detail::lifecycle::PixelSums> sums(static_cast<std::size_t>(count));
-  copy_to_host(backend, thrust::raw_pointer_cast(ws.sums.data()), sums.size(), sums.data());
+    images.push_back(k + 1 < q.model_count() ? q.image(k + 1).view() : ImageView<const S>{});
   std::vector<ObjectPixels> out;
-  for (const auto& sum : sums) out.push_back(sum.counts());
+  for (const auto& sum : reduce_per_group(frame.segmentation.backend(), images, frame.segmentation.size(),
+                                          detail::lifecycle::AddObjectPixel<S>{frame.segmentation.view(), border},
+                                          detail::lifecycle::PixelSums{}, ws))
+    out.push_back(sum.counts());
   return out;
 }
 

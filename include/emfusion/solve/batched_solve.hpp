@@ -129,12 +129,6 @@ struct BatchedTerm {
   }
 };
 
-/// After a term pass: the sum of problem p's terms into sums[p].
-struct StoreSum {
-  NormalEquations6* sums;
-  EMF_HD void operator()(int p, const NormalEquations6& sum) const { sums[p] = sum; }
-};
-
 /// After a term pass of a solve: the solver step of problem p, if it had
 /// asked for the pass, and its next request; whether it asks for another.
 template <class S>
@@ -285,7 +279,7 @@ std::vector<NormalEquations6> linearize_batch(const B& backend, const std::vecto
   detail::lay_out(backend, problems, requests, {}, ws);
   grouped_accumulate(backend, ws.groups, detail::batch_terms<S, B, P, N>(false, ws), NormalEquations6::zero(),
                      thrust::raw_pointer_cast(ws.partials.data()),
-                     detail::StoreSum{thrust::raw_pointer_cast(ws.sums.data())});
+                     detail::StoreGroupResult<NormalEquations6>{thrust::raw_pointer_cast(ws.sums.data())});
   return detail::download(backend, thrust::raw_pointer_cast(ws.sums.data()), problems.size());
 }
 
