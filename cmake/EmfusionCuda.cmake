@@ -25,6 +25,13 @@ if(NOT EMFUSION_CUDA STREQUAL "OFF")
     set(CMAKE_CUDA_STANDARD_REQUIRED ON)
     set(CMAKE_CUDA_EXTENSIONS OFF)
     find_package(CUDAToolkit REQUIRED)
+    # The batched solves loop on the device through a CUDA graph's
+    # conditional while node (core/grouped_loop.hpp), new in CUDA 12.4.
+    if(CUDAToolkit_VERSION VERSION_LESS 12.4)
+      message(FATAL_ERROR "emfusion's CUDA backend needs CUDA 12.4 or newer (conditional graph nodes); "
+                          "found CUDA ${CUDAToolkit_VERSION} at ${CUDAToolkit_BIN_DIR}. "
+                          "Install a newer toolkit, or build without CUDA (-DEMFUSION_CUDA=OFF).")
+    endif()
     set(EMFUSION_WITH_CUDA ON)
   elseif(EMFUSION_CUDA STREQUAL "ON")
     message(FATAL_ERROR "EMFUSION_CUDA=ON but no CUDA compiler was found: "

@@ -87,7 +87,7 @@ fi
 if [[ "$purpose" == cuda ]]; then
   # thrust comes with the toolkit; nvcc itself is not a Debian package here.
   if ! have_command nvcc && [[ ! -x "${cuda_include%/include}/bin/nvcc" ]]; then
-    log "nvcc not found on PATH, in \$CUDA_HOME/bin or /usr/local/cuda/bin: install the CUDA toolkit (12 or newer)" >&2
+    log "nvcc not found on PATH, in \$CUDA_HOME/bin or /usr/local/cuda/bin: install the CUDA toolkit (12.4 or newer)" >&2
     exit 1
   fi
 else
