@@ -118,8 +118,11 @@ class System {
     if (!result.mapped) {
       // Integrating a frame at a pose that is not its own would corrupt every
       // model; the detections and the deletion rules need that pose too.
-      for (int k = 0; k < int(map_.objects.size()); ++k)
-        result.object_status.push_back(object_status(map_, frame_, k, false, params_));
+      const int n = int(map_.objects.size());
+      const std::vector<ObjectPixels> pixels = all_object_pixels(
+          frame_, n, params_.visibility_border_for(frame_.segmentation.width()), object_pixels_workspace_);
+      for (int k = 0; k < n; ++k)
+        result.object_status.push_back(object_status(map_, frame_, k, false, params_, &pixels[std::size_t(k)]));
       map_.record_poses(timestamp);
       return finish(result, clock);
     }
