@@ -20,11 +20,11 @@ using namespace emfusion;
 
 namespace {
 
-/// The room at 160x120, 40 frames, one moving object, its simulated detector.
+/// The room at 160x120, 24 frames, one moving object, its simulated detector.
 const sim::DynamicScene<float>& small_room() {
   static const sim::DynamicScene<float> scene = [] {
     sim::DynamicSceneParams p;
-    p.width = 160, p.height = 120, p.frames = 40, p.moving_objects = 1;
+    p.width = 160, p.height = 120, p.frames = 24, p.moving_objects = 1;
     return sim::make_dynamic_room<float>(p);
   }();
   return scene;
