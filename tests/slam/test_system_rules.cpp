@@ -6,8 +6,8 @@
 // that leave the view are deleted, kept as lost and re-identified when
 // detected again (with lost_object_frames = 0: gone for good), and a new
 // object at the border survives until seen.
-// The three longest (resting, leaving the view, re-identification) run in
-// float only (SystemRuleConfigs, support/configs.hpp).
+// The two longest (resting, re-identification) run in float only
+// (SystemRuleConfigs, support/configs.hpp).
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
@@ -436,7 +436,7 @@ TEMPLATE_LIST_TEST_CASE("A model fits a frame only where the frame does not see 
 }
 
 TEMPLATE_LIST_TEST_CASE("An object that leaves the view is deleted; with lost_object_frames = 0 it is gone for good",
-                        "[slam]", emfusion::test::SystemRuleConfigs) {
+                        "[slam]", emfusion::test::HeavyConfigs) {
   using S = typename TestType::Scalar;
   using B = typename TestType::Backend;
   SystemParams<S> params = small_params<S>();
