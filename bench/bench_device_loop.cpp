@@ -6,6 +6,7 @@
 // solver's do; what is left is the launch or the graph's relaunch, the block
 // reductions, the count of finished segments and the group's tail. CUDA
 // builds only. Usage: bench_device_loop [--passes N] (default 200).
+#include <array>
 #include <cstdio>
 #include <stdexcept>
 #include <string>
@@ -67,25 +68,40 @@ int main(int argc, char** argv) {
       passes = examples::parse_positive_int(a, argv[++i]);
     }
     const Cuda backend{};
-    fmt::print("{} passes of 256-thread blocks, each segment 512 indices; microseconds a pass (best of 10)\n",
-               passes);
-    fmt::print("{:>6} {:>8} {:>9}  {:>10} {:>12}\n", "groups", "segments", "of each", "graph loop", "host launches");
+    const std::array<int, 4> per_body{1, 2, 4, 8};
+    fmt::print("{} passes of 256-thread blocks, each segment 512 indices; microseconds a pass (best of 10)\n", passes);
+    fmt::print("{:>6} {:>8} {:>9}  {:>9} {:>9} {:>9} {:>9}  {:>13}  {:>11}\n", "groups", "segments", "of each",
+               "graph x1", "graph x2", "graph x4", "graph x8", "host launches", "queued, idle");
     for (const int groups : {1, 3}) {
       for (const int per_group : {1, 16, 64, 128}) {
         Cuda::Vector<int> storage;
         const SegmentGroups layout = equal_groups(backend, groups, per_group * 512, per_group, storage);
         Cuda::Vector<NormalEquations6> partials(std::size_t(layout.segments));
         NormalEquations6* p = thrust::raw_pointer_cast(partials.data());
-        GroupedLoop loop;
-        const float in_graph = best_ms(backend, 10, [&] {
-          grouped_accumulate_while(backend, loop, layout, OneTerm{}, NormalEquations6::zero(), p, Again{}, passes);
-        });
+        std::array<float, 4> in_graph{};
+        for (std::size_t k = 0; k < per_body.size(); ++k) {
+          GroupedLoop loop(per_body[k]);
+          in_graph[k] = best_ms(backend, 10, [&] {
+            grouped_accumulate_while(backend, loop, layout, OneTerm{}, NormalEquations6::zero(), p, Again{}, passes);
+          });
+        }
+        // A loop of one pass with 8 a round against 1 a round: 7 passes
+        // queued after the end.
+        float one_pass[2]{};
+        for (const int k : {0, 1}) {
+          GroupedLoop loop(k == 0 ? 1 : 8);
+          one_pass[k] = best_ms(backend, 10, [&] {
+            grouped_accumulate_while(backend, loop, layout, OneTerm{}, NormalEquations6::zero(), p, Again{}, 1);
+          });
+        }
         const float launched = best_ms(backend, 10, [&] {
           for (int k = 0; k < passes; ++k)
             grouped_accumulate(backend, layout, OneTerm{}, NormalEquations6::zero(), p, Nothing{});
         });
-        fmt::print("{:>6} {:>8} {:>9}  {:>10.2f} {:>12.2f}\n", groups, layout.segments, per_group,
-                   1000.0 * in_graph / passes, 1000.0 * launched / passes);
+        fmt::print("{:>6} {:>8} {:>9}  {:>9.2f} {:>9.2f} {:>9.2f} {:>9.2f}  {:>13.2f}  {:>11.2f}\n", groups,
+                   layout.segments, per_group, 1000.0 * in_graph[0] / passes, 1000.0 * in_graph[1] / passes,
+                   1000.0 * in_graph[2] / passes, 1000.0 * in_graph[3] / passes, 1000.0 * launched / passes,
+                   1000.0 * (one_pass[1] - one_pass[0]) / 7);
       }
     }
     return 0;

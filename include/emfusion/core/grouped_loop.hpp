@@ -2,9 +2,11 @@
 // group's finish asks for another, without the host looking in between: the
 // loop of the batched solves (solve/batched_solve.hpp). On a device the
 // whole loop is one launch of a CUDA graph whose conditional while node
-// (CUDA 12.4 and later) runs a pass, and the pass's last group to finish
-// decides whether the node runs it again; the graph is built once and kept
-// in a GroupedLoop. On the CPU it is a plain loop.
+// (CUDA 12.4 and later) runs a few passes one after the other, and the last
+// group to finish a pass decides whether there is another (the passes left
+// in the node's body return at once when there is not, and the node stops);
+// the graph is built once and kept in a GroupedLoop. On the CPU it is a
+// plain loop.
 #pragma once
 
 #include <cstddef>
@@ -24,23 +26,28 @@ struct GroupedPasses {
   T* partials;
   Finish finish;
   int max_passes = 0;
-  int passes = 0;               ///< passes run so far
-  unsigned groups_done = 0;     ///< groups finished in this pass
-  unsigned groups_again = 0;    ///< of them, those that asked for another pass
+  int passes = 0;             ///< passes run so far
+  unsigned groups_done = 0;   ///< groups finished in this pass
+  unsigned groups_again = 0;  ///< of them, those that asked for another pass
+  int stopped = 0;            ///< the loop is over: passes still queued return at once
 };
 
 #if EMFUSION_HAS_CUDA
 namespace detail {
 /// One pass on a device. The grid is rounded up, so blocks past the
-/// layout's segments have nothing to do. The arguments are copied out of
-/// global memory once, as a kernel's own arguments would be. After each
-/// group's finish, its answer is counted (atomics, which every block sees
-/// alike); the pass's last group sets the loop's condition.
+/// layout's segments have nothing to do, and a pass queued after the loop
+/// ended does nothing at all. The arguments are copied out of global memory
+/// once, as a kernel's own arguments would be. After each group's finish,
+/// its answer is counted (atomics, which every block sees alike); the
+/// pass's last group sets the loop's condition, and on the last pass marks
+/// the loop stopped for the passes still queued in the node's body (they
+/// read it after this kernel has ended: no block of this pass reads it
+/// after the last group has counted).
 template <int Threads, class T, class F, class Finish>
 __global__ void __launch_bounds__(Threads)
     grouped_pass(GroupedPasses<T, F, Finish>* passes, cudaGraphConditionalHandle again) {
   const SegmentGroups layout = passes->layout;
-  if (int(blockIdx.x) >= layout.segments) return;
+  if (int(blockIdx.x) >= layout.segments || passes->stopped) return;
   const F f = passes->f;
   const T zero = passes->zero;
   const Finish finish = passes->finish;
@@ -51,7 +58,9 @@ __global__ void __launch_bounds__(Threads)
     const unsigned asking = atomicExch(&passes->groups_again, 0u);
     passes->groups_done = 0;  // read by the next pass, after this kernel
     const int done = ++passes->passes;
-    cudaGraphSetConditional(again, done < passes->max_passes && asking > 0 ? 1u : 0u);
+    if (done < passes->max_passes && asking > 0) return;  // the condition stays 1, as each launch sets it
+    passes->stopped = 1;
+    cudaGraphSetConditional(again, 0u);
   };
   accumulate_group_block<Threads>(int(blockIdx.x), f, zero, layout, passes->partials, finish_and_count);
 }
@@ -62,16 +71,29 @@ __global__ void __launch_bounds__(Threads)
 /// arguments' buffer on the device and the graph of the loop, built for one
 /// kind of pass (its functors' types) and a grid size; a call with another
 /// kind or more segments builds it again. Holds nothing on the CPU. A copy
-/// starts empty (a graph is not shared).
+/// starts empty (a graph is not shared) with the same passes a body.
+///
+/// `passes_per_body` passes run back to back in each round of the while
+/// node: the node's relaunch costs more than a launch queued behind another
+/// (about 4 us a pass on an H200, bench/bench_device_loop.cpp), and a pass
+/// queued after the loop has ended costs a launch that returns at once. 4
+/// measured best for the solvers (docs/decisions.md, "Several passes a
+/// round of the while node").
 class GroupedLoop {
  public:
   GroupedLoop() = default;
-  GroupedLoop(const GroupedLoop&) {}
-  GroupedLoop& operator=(const GroupedLoop&) { return *this; }
+  explicit GroupedLoop(int passes_per_body) : per_body_(passes_per_body < 1 ? 1 : passes_per_body) {}
+  GroupedLoop(const GroupedLoop& other) : per_body_(other.per_body_) {}
+  GroupedLoop& operator=(const GroupedLoop& other) {
+    if (per_body_ != other.per_body_) release(), per_body_ = other.per_body_;  // its graph is kept otherwise
+    return *this;
+  }
   ~GroupedLoop() { release(); }
 
   /// How many times a graph was built (a test's measure of reuse).
   int builds() const { return builds_; }
+  /// Passes a round of the device's while node.
+  int passes_per_body() const { return per_body_; }
 
 #if EMFUSION_HAS_CUDA
   /// The loop of `passes` on backend's stream, queued (it does not wait).
@@ -99,7 +121,7 @@ class GroupedLoop {
  private:
 #if EMFUSION_HAS_CUDA
   /// The graph: a while node (its condition 1 at every launch) whose body
-  /// is the pass, reading `arguments_`.
+  /// is per_body_ passes in a row, each reading `arguments_`.
   template <class Passes>
   void build(const void* pass_kernel, int grid) {
     if (exec_) cudaGraphExecDestroy(exec_), exec_ = nullptr;
@@ -117,7 +139,7 @@ class GroupedLoop {
     loop.conditional.handle = again;
     loop.conditional.type = cudaGraphCondTypeWhile;
     loop.conditional.size = 1;
-    cudaGraphNode_t loop_node = nullptr, pass_node = nullptr;
+    cudaGraphNode_t loop_node = nullptr;
     detail::check_cuda(cudaGraphAddNode(&loop_node, graph, nullptr, nullptr, 0, &loop), what);
     Passes* arguments = static_cast<Passes*>(arguments_);
     void* pass_arguments[] = {&arguments, &again};
@@ -126,7 +148,14 @@ class GroupedLoop {
     pass.gridDim = dim3(unsigned(grid));
     pass.blockDim = dim3(unsigned(detail::grouped_threads));
     pass.kernelParams = pass_arguments;
-    detail::check_cuda(cudaGraphAddKernelNode(&pass_node, loop.conditional.phGraph_out[0], nullptr, 0, &pass), what);
+    cudaGraphNode_t previous = nullptr;
+    for (int k = 0; k < per_body_; ++k) {
+      cudaGraphNode_t pass_node = nullptr;
+      detail::check_cuda(cudaGraphAddKernelNode(&pass_node, loop.conditional.phGraph_out[0],
+                                                previous ? &previous : nullptr, previous ? 1 : 0, &pass),
+                         what);
+      previous = pass_node;
+    }
     detail::check_cuda(cudaGraphInstantiate(&exec_, graph, 0), what);
     kernel_ = pass_kernel;
     grid_ = grid;
@@ -149,6 +178,7 @@ class GroupedLoop {
   const void* kernel_ = nullptr;
 #endif
   std::size_t bytes_ = 0;
+  int per_body_ = 4;
   int grid_ = 0;
   int builds_ = 0;
 };
