@@ -2,6 +2,7 @@
 // camera offsets in a fused synthetic room, robustness to 30 % corrupted
 // points, a single plane that must not make the solver diverge, and the
 // optional depth-noise weighting of the terms.
+#include <algorithm>
 #include <cmath>
 #include <random>
 #include <vector>
@@ -232,6 +233,51 @@ TEMPLATE_LIST_TEST_CASE("positive_box bounds the positive pixels; boxed terms ch
     for (int i = 0; i < 6; ++i) CHECK(b.g[i] == Approx(a.g[i]).epsilon(1e-9).margin(1e-12));
     for (int i = 0; i < 21; ++i) CHECK(b.H[i] == Approx(a.H[i]).epsilon(1e-9).margin(1e-12));
   }
+}
+
+TEMPLATE_LIST_TEST_CASE("positive_boxes gives each image's positive_box, past a reduction's 8 images", "[solve]",
+                        emfusion::test::AllConfigs) {
+  using S = typename TestType::Scalar;
+  using B = typename TestType::Backend;
+  const int w = 97, h = 61;
+  // Eleven images: image k positive in a rectangle that moves with k, one
+  // with a single pixel, one with none (negative values) and one all over.
+  std::vector<Image<S, B>> images;
+  for (int k = 0; k < 11; ++k) {
+    std::vector<S> q(std::size_t(w) * h, S(0));
+    if (k == 3) {
+      q[std::size_t(h - 1) * w + (w - 1)] = S(0.5);
+    } else if (k == 5) {
+      std::fill(q.begin(), q.end(), S(-1));
+    } else if (k == 9) {
+      std::fill(q.begin(), q.end(), S(1));
+    } else {
+      for (int v = 2 * k; v < 2 * k + 7; ++v)
+        for (int u = 3 * k + 1; u < 5 * k + 4; ++u) q[std::size_t(v) * w + u] = S(0.1) * S(k + 1);
+    }
+    images.push_back(Image<S, B>::from_host(w, h, q));
+  }
+  std::vector<const Image<S, B>*> pointers;
+  for (const auto& image : images) pointers.push_back(&image);
+  const B backend{};
+  const std::vector<PixelBox> boxes = positive_boxes(backend, pointers);
+  REQUIRE(boxes.size() == images.size());
+  for (std::size_t k = 0; k < images.size(); ++k) {
+    const PixelBox one = positive_box(backend, images[k]);
+    INFO("image " << k);
+    CHECK(boxes[k].x0 == one.x0);
+    CHECK(boxes[k].y0 == one.y0);
+    CHECK(boxes[k].x1 == one.x1);
+    CHECK(boxes[k].y1 == one.y1);
+  }
+  CHECK(boxes[3].area() == 1);
+  CHECK(boxes[5].empty());
+  CHECK(boxes[9].area() == w * h);
+  CHECK(positive_boxes(backend, std::vector<const Image<S, B>*>{}).empty());
+  // Images of another size than the first: refused, naming the function.
+  const Image<S, B> other(w + 1, h, S(1));
+  pointers.push_back(&other);
+  CHECK_THROWS_WITH(positive_boxes(backend, pointers), EMF_CONTAINS("positive_boxes"));
 }
 
 TEMPLATE_LIST_TEST_CASE("Coarse-to-fine alignment: the same pose as one level, most iterations on coarse levels",

@@ -11,7 +11,11 @@
 
 namespace emfusion {
 
-/// Milliseconds per stage of one frame (the stages of slam/system.hpp).
+/// Milliseconds per stage of one frame (the stages of slam/system.hpp),
+/// measured by a StageClock (core/stage_clock.hpp): on CUDA the device's
+/// progress from the end of one stage to the end of the next, read once at
+/// the end of the frame, so that timing does not drain the device between
+/// stages. `total` is the wall clock of System::process.
 struct StageTimes {
   double preprocess = 0, e_step = 0, track_background = 0, track_objects = 0, raycast = 0, detections = 0,
          integrate = 0, foreground = 0, total = 0;

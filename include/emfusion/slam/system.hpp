@@ -25,12 +25,12 @@
 #pragma once
 
 #include <algorithm>
-#include <chrono>
 #include <concepts>
 #include <vector>
 
 #include "emfusion/core/camera.hpp"
 #include "emfusion/core/image.hpp"
+#include "emfusion/core/stage_clock.hpp"
 #include "emfusion/detect/detection.hpp"
 #include "emfusion/likelihood/measurement_likelihood.hpp"
 #include "emfusion/robust/norms.hpp"
@@ -102,19 +102,19 @@ class System {
     result.timestamp = timestamp;
     result.detector_frame = detections != nullptr;
     result.detections = detections ? int(detections->instances.size()) : 0;
-    Clock clock(backend_);
+    clock_.start(backend_);
 
     result.depth = preprocess(depth, camera_, params_, frame_);
-    result.times.preprocess = clock.lap();
+    clock_.lap(result.times.preprocess);
     // Until a frame with enough depth has started the map there is nothing
     // to track against: that frame is mapped at the current pose (the
     // first camera defines the world).
     const bool starts_map = !map_.started && result.depth.valid >= std::max(params_.min_camera_terms, 1);
     frame_.object_tracks.assign(map_.objects.size(), PoseTrack{});
-    if (map_.started) track(result, timestamp, clock);
+    if (map_.started) track(result, timestamp);
     result.mapped = starts_map || result.camera_tracking == TrackingOutcome::tracked;
     render_models(map_, frame_, camera_, params_, render_workspace_);
-    result.times.raycast = clock.lap();
+    clock_.lap(result.times.raycast);
     if (!result.mapped) {
       // Integrating a frame at a pose that is not its own would corrupt every
       // model; the detections and the deletion rules need that pose too.
@@ -124,7 +124,7 @@ class System {
       for (int k = 0; k < n; ++k)
         result.object_status.push_back(object_status(map_, frame_, k, false, params_, &pixels[std::size_t(k)]));
       map_.record_poses(timestamp);
-      return finish(result, clock);
+      return finish(result);
     }
     // Detection handling reads the segmentation on the host (detector
     // frames only); it changes only when objects are relocalized below.
@@ -147,14 +147,14 @@ class System {
     if (det)
       update = handle_detections(map_, frame_, *det, seg, camera_, params_, parts_.likelihood, parts_.object_norm,
                                  parts_.solver, result);
-    result.times.detections = clock.lap();
+    clock_.lap(result.times.detections);
 
     integrate_models(map_, frame_, camera_, params_, update.fresh, starts_map, &integration_workspace_,
                      &sparse_workspace_, &object_integration_workspace_);
     map_.started = true;
-    result.times.integrate = clock.lap();
+    clock_.lap(result.times.integrate);
     if (det) update_foreground_counts(map_, frame_, *det, seg, update.object_of_detection, update.fresh, camera_);
-    result.times.foreground = clock.lap();
+    clock_.lap(result.times.foreground);
 
     // Objects deleted now were tracked in this frame: its pose is the last
     // of their trajectories.
@@ -172,7 +172,7 @@ class System {
     // the C library may keep; on the CPU that is resident memory.
     if constexpr (!B::is_device)
       if (!result.deleted.empty() || det) release_free_host_memory();
-    return finish(result, clock);
+    return finish(result);
   }
 
   /// Replaces the whole state with `map` (a loaded checkpoint,
@@ -219,55 +219,39 @@ class System {
   const Image<Vec3<S>, B>& points() const { return frame_.points; }
 
  private:
-  /// Milliseconds per stage, with the backend's work finished.
-  struct Clock {
-    using clock = std::chrono::steady_clock;
-    explicit Clock(const B& b) : backend(b), start(clock::now()), last(start) {}
-    double lap() {
-      backend.synchronize();
-      const auto now = clock::now();
-      const double ms = std::chrono::duration<double, std::milli>(now - last).count();
-      last = now;
-      return ms;
-    }
-    double total() const { return std::chrono::duration<double, std::milli>(clock::now() - start).count(); }
-    const B& backend;
-    clock::time_point start, last;
-  };
-
   /// Stages 2 and 3: the E-step at the predicted camera pose (the previous
   /// one without motion prediction), the camera, then (if it was tracked)
   /// the E-step again at the objects' predicted poses and every object, and
   /// the E-step at the final poses, which mapping and the deletion rules use.
-  void track(FrameResult& result, double timestamp, Clock& clock) {
+  void track(FrameResult& result, double timestamp) {
     const PoseStarts<S> camera_starts = predict_camera(map_, timestamp, params_);
     associate(map_, frame_, parts_.likelihood, params_);
-    result.times.e_step += clock.lap();
+    clock_.lap(result.times.e_step);
     const PoseTrack camera = track_camera(map_, frame_, params_, parts_.background_norm, parts_.solver,
                                           &tracking_workspace_, &camera_starts);
     result.camera = camera.report;
     result.camera_tracking = camera.outcome;
     result.camera_step = camera.step;
-    result.times.track_background = clock.lap();
+    clock_.lap(result.times.track_background);
     if (camera.outcome != TrackingOutcome::tracked) return;  // the associations stay those at the previous poses
     if (!map_.objects.empty()) {
       const std::vector<PoseStarts<S>> object_starts = predict_objects(map_, timestamp, params_);
       associate(map_, frame_, parts_.likelihood, params_);
-      result.times.e_step += clock.lap();
+      clock_.lap(result.times.e_step);
       frame_.object_tracks = track_objects(map_, frame_, params_, parts_.object_norm, parts_.solver,
                                            &tracking_workspace_, &object_starts);
       for (const PoseTrack& t : frame_.object_tracks) result.objects.push_back(t.report);
-      result.times.track_objects = clock.lap();
+      clock_.lap(result.times.track_objects);
     }
     // Since the last E-step only objects moved (or, without objects, the
     // camera: then the background is evaluated again).
     associate(map_, frame_, parts_.likelihood, params_, true);
-    result.times.e_step += clock.lap();
+    clock_.lap(result.times.e_step);
   }
 
-  FrameResult& finish(FrameResult& result, const Clock& clock) {
+  FrameResult& finish(FrameResult& result) {
     result.live_objects = int(map_.objects.size());
-    result.times.total = clock.total();
+    result.times.total = clock_.finish();
     ++map_.frames;
     return result;
   }
@@ -284,6 +268,10 @@ class System {
   ObjectIntegrationWorkspace<S, B> object_integration_workspace_;
   ObjectPixelsWorkspace<S, B> object_pixels_workspace_;
   SparseIntegrationWorkspace<S, B> sparse_workspace_;
+  /// The stage times of the frame being processed: on CUDA events queued at
+  /// each stage's end and read once at its finish, so the device is not
+  /// drained between stages to time them.
+  StageClock<B> clock_;
 };
 
 }  // namespace emfusion

@@ -369,10 +369,15 @@ std::vector<PoseTrack> track_objects(Map<S, B>& map, const Frame<S, B>& frame, c
     std::vector<Terms> terms;
     std::vector<decltype(scaled_norm(norm, S(1)))> norms;
     std::vector<PoseStarts<S>> from, in;
+    // Every object's box of associated pixels in one reduction (on a GPU
+    // one wait, not one an object).
+    std::vector<const Image<S, B>*> associations;
+    for (std::size_t k = 0; k < n; ++k) associations.push_back(&frame.associations.image(int(k) + 1));
+    const std::vector<PixelBox> boxes =
+        align.use_association ? positive_boxes(backend, associations) : std::vector<PixelBox>(n);
     for (std::size_t k = 0; k < n; ++k) {
       const TsdfVolume<S, B>& volume = map.objects[k]->volume();
-      terms.push_back(sdf_alignment_in_box(volume, frame.points, &frame.associations.image(int(k) + 1), align,
-                                           backend));
+      terms.push_back(sdf_alignment_in_box(volume, frame.points, associations[k], align, boxes[k]));
       norms.push_back(scaled_norm(norm, volume.voxel_size()));
       const auto world_and_volume = volume_starts(k);
       from.push_back(world_and_volume.first), in.push_back(world_and_volume.second);

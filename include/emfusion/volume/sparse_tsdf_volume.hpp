@@ -631,8 +631,9 @@ BlockAllocation allocate_blocks(SparseTsdfVolume<S, B, Store>& volume, const Ima
   if constexpr (B::is_device) {
     thrust::fill(volume.backend().policy(), ws.counter.begin(), ws.counter.end(), 0ull);
     for_each_index(volume.backend(), depth.size(), f);
-    count = std::size_t(transform_reduce_index(volume.backend(), 1, detail::sparse::ReadCounter{f.count}, 0ull,
-                                               thrust::plus<unsigned long long>()));
+    unsigned long long written = 0;
+    copy_to_host(volume.backend(), f.count, 1, &written);
+    count = std::size_t(written);
   } else {
     // Chunks of rows; then each chunk's keys moved to follow the previous.
     const int chunks = std::min(depth.height(), 64);

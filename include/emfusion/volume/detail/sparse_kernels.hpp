@@ -165,12 +165,6 @@ struct BandBlockKeyRows {
   }
 };
 
-/// The value of a counter on the backend, read through a reduction of one.
-struct ReadCounter {
-  const unsigned long long* counter;
-  EMF_HD unsigned long long operator()(int) const { return *counter; }
-};
-
 /// Inserts new key i as block first_block + i.
 struct InsertBlock {
   const Key* keys;  // new, distinct, not yet stored
