@@ -2,21 +2,15 @@
 // stage to where they are told to, a stage with work takes time, the laps
 // fit inside the frame's total, and the clock serves frame after frame with
 // more laps than before, on every backend built.
-#include <tuple>
 
 #include "emfusion/core/parallel.hpp"
 #include "emfusion/core/stage_clock.hpp"
 #include "support/catch.hpp"
+#include "support/configs.hpp"
 
 using namespace emfusion;
 
 namespace {
-#if EMFUSION_HAS_CUDA
-using Backends = std::tuple<Host, Cuda>;
-#else
-using Backends = std::tuple<Host>;
-#endif
-
 /// Work that takes a while on any backend: two passes over 1 M floats.
 struct Churn {
   float* data;
@@ -29,7 +23,7 @@ struct Churn {
 }  // namespace
 
 TEMPLATE_LIST_TEST_CASE("StageClock adds each stage's time where its lap says, within the frame's total", "[core]",
-                        Backends) {
+                        emfusion::test::AllBackends) {
   using B = TestType;
   const B backend{};
   typename B::template Vector<float> buffer(std::size_t(1) << 20, 0.0f);

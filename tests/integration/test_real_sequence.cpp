@@ -4,7 +4,6 @@
 // long simulated runs (label integration, release build only): under the
 // sanitizers its 40 integrations of a 256^3 volume took 96 s of one core.
 #include <filesystem>
-#include <tuple>
 
 #include "emfusion/eval/ate.hpp"
 #include "emfusion/io/tum.hpp"
@@ -17,15 +16,8 @@
 
 using namespace emfusion;
 
-namespace {
-#if EMFUSION_HAS_CUDA
-using Backends = std::tuple<Host, Cuda>;
-#else
-using Backends = std::tuple<Host>;
-#endif
-}  // namespace
-
-TEMPLATE_LIST_TEST_CASE("The camera tracker follows a real Kinect sequence", "[integration][solve]", Backends) {
+TEMPLATE_LIST_TEST_CASE("The camera tracker follows a real Kinect sequence", "[integration][solve]",
+                        emfusion::test::AllBackends) {
   using S = float;
   using B = TestType;
   const std::string dir = std::string(EMFUSION_SHARED_DATA_DIR) + "/redkitchen_300";

@@ -21,6 +21,15 @@ using AllConfigs = std::tuple<Config<float, Host>, Config<double, Host>, Config<
 using AllConfigs = std::tuple<Config<float, Host>, Config<double, Host>>;
 #endif
 
+/// Every backend built, for tests whose scalar does not matter:
+/// TEMPLATE_LIST_TEST_CASE("...", "[tag]", emfusion::test::AllBackends)
+/// gives the backend as TestType.
+#if EMFUSION_HAS_CUDA
+using AllBackends = std::tuple<Host, Cuda>;
+#else
+using AllBackends = std::tuple<Host>;
+#endif
+
 /// The long whole-system rule tests (tests/slam/test_system_rules.cpp):
 /// float on every backend built. Their rules do not depend on the scalar,
 /// and System<double> runs in the stage and hostile-frame tests; in double

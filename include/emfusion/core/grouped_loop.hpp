@@ -76,8 +76,9 @@ __global__ void __launch_bounds__(Threads)
 /// `passes_per_body` passes run back to back in each round of the while
 /// node: the node's relaunch costs more than a launch queued behind another
 /// (about 4 us a pass on an H200, bench/bench_device_loop.cpp), and a pass
-/// queued after the loop has ended costs a launch that returns at once. 4
-/// measured best for the solvers (docs/decisions.md, "Several passes a
+/// queued after the loop has ended costs a launch that returns at once
+/// (about 1.2 us). The default, 4, recovers most of the relaunch; 8 measured
+/// no better on the whole system (docs/decisions.md, "Several passes a
 /// round of the while node").
 class GroupedLoop {
  public:
