@@ -261,14 +261,19 @@ TEMPLATE_LIST_TEST_CASE("positive_boxes gives each image's positive_box, past a 
   for (const auto& image : images) pointers.push_back(&image);
   const B backend{};
   const std::vector<PixelBox> boxes = positive_boxes(backend, pointers);
+  // The reductions of 8 at once (the device's way) on every backend.
+  const std::vector<PixelBox> at_once = detail::positive_boxes_at_once(backend, pointers);
   REQUIRE(boxes.size() == images.size());
+  REQUIRE(at_once.size() == images.size());
   for (std::size_t k = 0; k < images.size(); ++k) {
     const PixelBox one = positive_box(backend, images[k]);
     INFO("image " << k);
-    CHECK(boxes[k].x0 == one.x0);
-    CHECK(boxes[k].y0 == one.y0);
-    CHECK(boxes[k].x1 == one.x1);
-    CHECK(boxes[k].y1 == one.y1);
+    for (const PixelBox& b : {boxes[k], at_once[k]}) {
+      CHECK(b.x0 == one.x0);
+      CHECK(b.y0 == one.y0);
+      CHECK(b.x1 == one.x1);
+      CHECK(b.y1 == one.y1);
+    }
   }
   CHECK(boxes[3].area() == 1);
   CHECK(boxes[5].empty());
