@@ -15,6 +15,7 @@
 
 #include "emfusion/core/grouped_loop.hpp"
 #include "emfusion/core/parallel.hpp"
+#include "emfusion/core/stage_clock.hpp"
 #include "emfusion/solve/normal_equations.hpp"
 #include "support/args.hpp"
 
@@ -35,24 +36,21 @@ struct Nothing {
   EMF_HD void operator()(int, const NormalEquations6&) const {}
 };
 
-/// Milliseconds of `run` on the backend's stream, the best of `repeats`.
+/// Milliseconds of `run` on the backend's stream (the device's time between
+/// two events: StageClock), the best of `repeats`.
 template <class Run>
 float best_ms(const Cuda& backend, int repeats, Run&& run) {
-  cudaEvent_t start, end;
-  detail::check_cuda(cudaEventCreate(&start), "cudaEventCreate");
-  detail::check_cuda(cudaEventCreate(&end), "cudaEventCreate");
-  float best = 1e30f;
+  StageClock<Cuda> clock;
+  double best = 1e30;
   for (int r = 0; r < repeats; ++r) {
-    detail::check_cuda(cudaEventRecord(start, backend.stream), "cudaEventRecord");
+    double ms = 0;
+    clock.start(backend);
     run();
-    detail::check_cuda(cudaEventRecord(end, backend.stream), "cudaEventRecord");
-    detail::check_cuda(cudaEventSynchronize(end), "cudaEventSynchronize");
-    float ms = 0;
-    detail::check_cuda(cudaEventElapsedTime(&ms, start, end), "cudaEventElapsedTime");
+    clock.lap(ms);
+    clock.finish();
     best = ms < best ? ms : best;
   }
-  cudaEventDestroy(start), cudaEventDestroy(end);
-  return best;
+  return float(best);
 }
 
 }  // namespace

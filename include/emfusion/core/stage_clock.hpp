@@ -18,6 +18,13 @@
 
 namespace emfusion {
 
+namespace detail {
+using StageWall = std::chrono::steady_clock;
+inline double milliseconds_between(StageWall::time_point a, StageWall::time_point b) {
+  return std::chrono::duration<double, std::milli>(b - a).count();
+}
+}  // namespace detail
+
 /// A frame's stage clock on backend B: start(), lap(into) at the end of
 /// each stage (its milliseconds are added to `into`, which must outlive
 /// finish()), finish() for the total. Any backend without events of its own
@@ -27,26 +34,22 @@ class StageClock {
  public:
   void start(const B& backend) {
     backend_ = backend;
-    begin_ = last_ = Wall::now();
+    begin_ = last_ = detail::StageWall::now();
   }
   void lap(double& into) {
     backend_.synchronize();
-    const auto now = Wall::now();
-    into += milliseconds(last_, now);
+    const auto now = detail::StageWall::now();
+    into += detail::milliseconds_between(last_, now);
     last_ = now;
   }
   double finish() {
     backend_.synchronize();
-    return milliseconds(begin_, Wall::now());
+    return detail::milliseconds_between(begin_, detail::StageWall::now());
   }
 
- protected:
-  using Wall = std::chrono::steady_clock;
-  static double milliseconds(Wall::time_point a, Wall::time_point b) {
-    return std::chrono::duration<double, std::milli>(b - a).count();
-  }
+ private:
   B backend_{};
-  Wall::time_point begin_{}, last_{};
+  detail::StageWall::time_point begin_{}, last_{};
 };
 
 #if EMFUSION_HAS_CUDA
@@ -70,7 +73,7 @@ class StageClock<Cuda> {
   void start(const Cuda& backend) {
     backend_ = backend;
     laps_.clear();
-    begin_ = Wall::now();
+    begin_ = detail::StageWall::now();
     record();
   }
   void lap(double& into) {
@@ -79,7 +82,7 @@ class StageClock<Cuda> {
   }
   double finish() {
     backend_.synchronize();
-    const double total = std::chrono::duration<double, std::milli>(Wall::now() - begin_).count();
+    const double total = detail::milliseconds_between(begin_, detail::StageWall::now());
     for (std::size_t i = 0; i < laps_.size(); ++i) {
       float ms = 0;
       detail::check_cuda(cudaEventElapsedTime(&ms, events_[i], events_[i + 1]), "StageClock: cudaEventElapsedTime");
@@ -90,7 +93,6 @@ class StageClock<Cuda> {
   }
 
  private:
-  using Wall = std::chrono::steady_clock;
   /// The event of lap laps_.size() (0: the start), queued now.
   void record() {
     const std::size_t k = laps_.size();
@@ -110,7 +112,7 @@ class StageClock<Cuda> {
   Cuda backend_{};
   std::vector<cudaEvent_t> events_;
   std::vector<double*> laps_;
-  Wall::time_point begin_{};
+  detail::StageWall::time_point begin_{};
 };
 #endif
 

@@ -101,9 +101,7 @@ struct PositivePixelBoxes {  // PositivePixelBox of pixel i in each of q[0..n)
   int n = 0;
   EMF_HD BoxSet operator()(int i) const {
     BoxSet set;
-    const int u = i % q[0].width, v = i / q[0].width;
-    for (int k = 0; k < n; ++k)
-      if (q[k][i] > S(0)) set.box[k] = PixelBox{u, v, u + 1, v + 1};
+    for (int k = 0; k < n; ++k) set.box[k] = PositivePixelBox<S>{q[k]}(i);
     return set;
   }
 };
