@@ -435,6 +435,89 @@ TEMPLATE_LIST_TEST_CASE("A model fits a frame only where the frame does not see 
   CHECK_FALSE(consistent_with_frame(ball, T_volume_camera, seen, elsewhere, camera));
 }
 
+TEMPLATE_LIST_TEST_CASE("A lost object is fitted first from its last pose, and only as far as it can have moved",
+                        "[slam]", emfusion::test::SystemRuleConfigs) {
+  using S = typename TestType::Scalar;
+  using B = typename TestType::Backend;
+  // A box 1.2 m ahead of a wall 2 m ahead (320x240 camera at the world
+  // origin), fused into an object model from one view with the box as its
+  // detection; then fitted to detections of it.
+  const PinholeCamera<S> camera{S(280), S(280), S(159.5), S(119.5), 320, 240};
+  const auto frame_of = [&](const SE3<S>& T_world_box, const Vec3<S>& half_extents, std::vector<S>& mask_px) {
+    sim::Scene<S> scene;
+    scene.add(sim::make_plane(sim::look_at(vec3(S(0), S(0), S(2)), Vec3<S>::zero(), vec3(S(0), S(-1), S(0)))));
+    scene.add(sim::make_box(T_world_box, half_extents));
+    Image<S, Host> d;
+    Image<int, Host> labels;
+    sim::render_depth(scene, camera, SE3<S>::identity(), d, &labels);
+    Frame<S, B> f;
+    f.depth = d.template to<B>();
+    back_project(f.depth, camera, f.points);
+    mask_px.clear();
+    for (int l : labels.to_host()) mask_px.push_back(S(l == 1));
+    return f;
+  };
+  const auto target_of = [&](const Frame<S, B>& f, const std::vector<S>& mask_px) {
+    detail::reidentification::DetectionTarget<S, B> t;
+    t.centroid = Vec3<S>::zero();
+    const std::vector<Vec3<S>> points = f.points.to_host();
+    for (std::size_t i = 0; i < points.size(); ++i)
+      if (mask_px[i] > S(0) && is_valid(points[i])) t.centroid = t.centroid + points[i], ++t.points;
+    t.centroid = t.centroid / S(t.points);
+    t.ray = normalized(t.centroid);
+    t.mask = Image<S, Host>::from_host(camera.width, camera.height, mask_px).template to<B>();
+    return t;
+  };
+  const auto model_of = [&](const Frame<S, B>& f, const std::vector<S>& mask_px) {
+    ObjectModel<S, B> o(1, "book", SE3<S>::translation(vec3(S(0), S(0), S(1.2))), 64, S(0.008), S(10));
+    const auto seen = target_of(f, mask_px);
+    for (int k = 0; k < 3; ++k) integrate(o.volume(), f.depth, camera, SE3<S>::identity(), &seen.mask);
+    return o;
+  };
+  SystemParams<S> params = small_params<S>();
+  const auto fit = [&](const ObjectModel<S, B>& o, const Frame<S, B>& f, const std::vector<S>& mask_px,
+                       int frames_lost) {
+    return detail::reidentification::fit_to_target(o, target_of(f, mask_px), f, SE3<S>::identity(), params,
+                                                   HuberNorm<S>{params.huber_voxels}, LevenbergMarquardt{params.lm},
+                                                   frames_lost);
+  };
+  // How far a fit (T_volume_camera, the camera at the world origin) moved the model from where it was.
+  const auto moved_by = [&](const ObjectModel<S, B>& o, const SE3<S>& T_volume_camera) {
+    return double(norm(T_volume_camera.inverse().translation() - o.volume().pose().translation()));
+  };
+  SECTION("a patch of a flat panel where it was: the fit from the last pose is kept, not a slid one") {
+    // The detection is a patch of the panel's face off its centre: the
+    // model fits it as well slid along the face (the starts at the patch's
+    // centroid slide it about 12 cm), and the pose it was last in wins.
+    const SE3<S> T_panel = SE3<S>::translation(vec3(S(0), S(0), S(1.2)));
+    const Vec3<S> half = vec3(S(0.2), S(0.15), S(0.02));
+    std::vector<S> whole, patch;
+    const Frame<S, B> f = frame_of(T_panel, half, whole);
+    const ObjectModel<S, B> panel = model_of(f, whole);
+    patch = whole;
+    for (int v = 0; v < camera.height; ++v)
+      for (int u = 0; u < camera.width; ++u)  // the upper left quarter of the face, 4 px inside its edges
+        if (!(u > 117 + 4 && u < 160 - 4 && v > 88 + 4 && v < 120 - 4)) patch[std::size_t(v * camera.width + u)] = 0;
+    const auto [inliers, T] = fit(panel, f, patch, 1);
+    CHECK(inliers > 0.9);
+    CHECK(moved_by(panel, T) < 0.005);
+  }
+  SECTION("a box detected 6 cm away: found within the bound, refused beyond it") {
+    const auto box_at = [](S x) { return SE3<S>(so3_exp(vec3(S(0.2), S(0.4), S(0))), vec3(x, S(0), S(1.2))); };
+    const Vec3<S> half = vec3(S(0.15), S(0.1), S(0.12));
+    std::vector<S> here, there;
+    const ObjectModel<S, B> box = model_of(frame_of(box_at(S(0)), half, here), here);
+    const Frame<S, B> moved = frame_of(box_at(S(0.06)), half, there);
+    const auto [inliers, T] = fit(box, moved, there, 1);
+    CHECK(inliers > 0.9);
+    CHECK(std::fabs(moved_by(box, T) - 0.06) < 0.01);
+    params.max_object_motion.translation = S(0.01);  // 1 cm a frame: 6 cm takes more than 5 frames
+    CHECK(fit(box, moved, there, 3).first == 0);
+    CHECK(fit(box, moved, there, 8).first > 0.9);
+    CHECK(fit(box, moved, there, 0).first > 0.9);  // 0: not a lost object, no bound
+  }
+}
+
 TEMPLATE_LIST_TEST_CASE("An object that leaves the view is deleted; with lost_object_frames = 0 it is gone for good",
                         "[slam]", emfusion::test::HeavyConfigs) {
   using S = typename TestType::Scalar;

@@ -148,6 +148,8 @@ const std::vector<ParameterEntry<S>>& parameter_table() {
       EMF_INTEGER("lost_object_frames", lost_object_frames, "keep objects that left the view this long (0: delete)"),
       EMF_INTEGER("max_lost_objects", max_lost_objects, "most lost objects kept for re-identification"),
       EMF_NUMBER("reidentify_min_inliers", reidentify_min_inliers, "share of a detection on a lost object's surface"),
+      EMF_NUMBER("reidentify_keep_margin", reidentify_keep_margin,
+                 "share of a detection another fit must add to replace the fit from an object's last pose"),
       EMF_NUMBER("relocalize_below", relocalize_below,
                  "move unmatched objects with a lower mean association onto a detection (0: off)"),
       EMF_NUMBER("merge_min_inliers", merge_min_inliers,

@@ -146,6 +146,12 @@ struct SystemParams {
   int lost_object_frames = 900;
   int max_lost_objects = 8;
   double reidentify_min_inliers = 0.6;
+  /// A re-identification or relocalisation fit from the object's last pose
+  /// is kept unless a fit from another start puts this much more of the
+  /// detection's points on its surface (a symmetric object fits as well
+  /// turned; docs/system.md, "Lost objects"). 1: the last pose always wins
+  /// when it fits; 0: the best fit wins.
+  double reidentify_keep_margin = 0.05;
   /// Objects left behind (docs/system.md): on a detector frame, a live
   /// object that no detection matched and whose mean association over the
   /// pixels it is drawn on is below this is tried against the unmatched
@@ -246,6 +252,8 @@ struct SystemParams {
     detail::require(reidentify_min_inliers > 0 && reidentify_min_inliers <= 1, w,
                     "reidentify_min_inliers must be in (0, 1]");
     detail::require(relocalize_below >= 0 && relocalize_below <= 1, w, "relocalize_below must be in [0, 1]");
+    detail::require(reidentify_keep_margin >= 0 && reidentify_keep_margin <= 1, w,
+                    "reidentify_keep_margin must be in [0, 1]");
     detail::require(merge_min_inliers >= 0 && merge_min_inliers <= 1, w, "merge_min_inliers must be in [0, 1]");
     detail::require(background_integration.max_weight > S(0) && object_integration.max_weight > S(0), w,
                     "max_weight must be positive");

@@ -8,6 +8,7 @@
 // detection (relocalize_objects).
 #pragma once
 
+#include <algorithm>
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
@@ -104,17 +105,26 @@ std::optional<DetectionTarget<S, B>> detection_target(const Frame<S, B>& frame, 
 }
 
 /// How well object `o` fits the target: aligned (`norm` in its voxels,
-/// `solver`) to the detection's points from its orientation as the camera
-/// sees it now, its box centre placed at the points' centroid pushed back
-/// along the ray by 0, 1/16, 1/8 and 3/16 of the box side (the visible
-/// surface lies in front of the object's centre; an object fills about half
-/// its box). Returns the best share of the points within a Huber delta of
-/// its surface over the converged solves (0: none) and that solve's
-/// T_volume_camera.
+/// `solver`) to the detection's points first from its last pose, then from
+/// its orientation as the camera sees it now with its box centre placed at
+/// the points' centroid pushed back along the ray by 0, 1/16, 1/8 and 3/16
+/// of the box side (the visible surface lies in front of the object's
+/// centre; an object fills about half its box). Returns the best share of
+/// the points within a Huber delta of its surface over the converged solves
+/// (0: none) and that solve's T_volume_camera. The fit from the last pose
+/// is kept unless another puts params.reidentify_keep_margin more of the
+/// points on the surface: an object of symmetric shape (a box, a cylinder)
+/// fits its points as well turned by a quarter or half turn, and the pose
+/// it was last seen in is the likelier one. With `frames_lost` > 0 (a lost
+/// object, lost that many frames ago), a fit that puts the object's box
+/// centre further from where it was last, or turns it further, than
+/// frames_lost times params.max_object_motion is no candidate: the object
+/// cannot have moved that far since.
 template <class S, Backend B, class Norm, class Solver>
 std::pair<double, SE3<S>> fit_to_target(const ObjectModel<S, B>& o, const DetectionTarget<S, B>& target,
                                         const Frame<S, B>& frame, const SE3<S>& T_world_camera,
-                                        const SystemParams<S>& params, const Norm& norm, const Solver& solver) {
+                                        const SystemParams<S>& params, const Norm& norm, const Solver& solver,
+                                        int frames_lost = 0) {
   const SdfAlignmentParams<S> align = alignment_params(params, params.object_integration.max_weight);
   SdfAlignmentParams<S> count = align;
   count.use_map_confidence = false;
@@ -123,19 +133,30 @@ std::pair<double, SE3<S>> fit_to_target(const ObjectModel<S, B>& o, const Detect
   const Vec3<S> centre = S(0.5) * volume.view().extent();
   const auto R = (volume.pose().inverse() * T_world_camera).rotation();
   const S step = volume.view().extent().x() / S(16);
-  double best_inliers = 0;
+  double best_inliers = 0, to_beat = 0;
   SE3<S> best_T;
-  for (int h = 0; h < 4; ++h) {
+  for (int h = -1; h < 4; ++h) {
     const Vec3<S> at = target.centroid + (S(h) * step) * target.ray;
-    const SE3<S> start(R, centre - R * at);
+    const SE3<S> start = h < 0 ? volume.pose().inverse() * T_world_camera : SE3<S>(R, centre - R * at);
     SolveReport report;
     const SE3<S> T = align_in_volume(volume, frame.points, &target.mask, start, scaled_norm(norm, volume.voxel_size()),
                                      align, solver, &report);
     if (!report.converged() || report.terms < double(params.min_object_terms)) continue;
+    if (frames_lost > 0) {
+      // The move from the last pose: of the box centre, and the turn.
+      const SE3<S> last = volume.pose(), now = T_world_camera * T.inverse();
+      const double moved = double(emfusion::norm(now * centre - last * centre));
+      const double turned = double(emfusion::norm(so3_log((last.inverse() * now).rotation())));
+      const MotionBound<S>& bound = params.max_object_motion;
+      if (MotionBound<S>{S(frames_lost) * bound.translation, S(frames_lost) * bound.rotation_degrees}.exceeded_by(
+              moved, turned))
+        continue;
+    }
     const NormalEquations6 n = linearize(frame.points.backend(), make_sdf_alignment(volume, frame.points, &target.mask, count),
                                          OffSurfaceCount<S>{delta}, T);
     const double inliers = (n.terms - n.cost) / double(target.points);
-    if (inliers > best_inliers) best_inliers = inliers, best_T = T;
+    if (h < 0) to_beat = inliers + params.reidentify_keep_margin;
+    if (inliers > best_inliers && (h < 0 || inliers > to_beat)) best_inliers = inliers, best_T = T;
   }
   return {best_inliers, best_T};
 }
@@ -209,7 +230,8 @@ std::optional<NewObjectWeights<S, B>> reidentify(Map<S, B>& map, const Frame<S, 
     const ObjectModel<S, B>& o = *map.lost[k].object;
     if (o.class_name() != inst.class_name) continue;
     const auto [inliers, T] =
-        detail::reidentification::fit_to_target(o, *target, frame, map.T_world_camera, params, norm, solver);
+        detail::reidentification::fit_to_target(o, *target, frame, map.T_world_camera, params, norm, solver,
+                                                std::max(map.frames - map.lost[k].lost_at, 1));
     if (inliers > best_inliers) best = int(k), best_inliers = inliers, best_T = T;
   }
   if (best < 0 || best_inliers < params.reidentify_min_inliers ||
