@@ -4,8 +4,9 @@
 // spills onto the wall behind still sizes the volume by the object, existence
 // falls below 0.1 after repeated misses and the object is deleted, objects
 // that leave the view are deleted, kept as lost and re-identified when
-// detected again (with lost_object_frames = 0: gone for good), and a new
-// object at the border survives until seen.
+// detected again (with lost_object_frames = 0: gone for good; fitted first
+// from the pose they were lost in and only as far as they can have moved),
+// and a new object at the border survives until seen.
 // The two longest (resting, re-identification) run in float only
 // (SystemRuleConfigs, support/configs.hpp).
 #include <algorithm>
