@@ -302,8 +302,12 @@ PoseTrack track_camera(Map<S, B>& map, const Frame<S, B>& frame, const SystemPar
     const auto background_norm = scaled_norm(norm, background.voxel_size());
     if constexpr (solved_in_batches<Solver>) {
       std::vector<PoseTrack> tracks;
+      // The background's association is positive nearly everywhere: its
+      // box would be the whole image, and finding it costs a reduction and,
+      // on a GPU, a wait for the host. The terms are those of the box (the
+      // stride's grid starts at the image's corner either way).
       const auto terms = sdf_alignment_in_box(background, frame.points, &frame.associations.image(0), align,
-                                              background.backend());
+                                              PixelBox::whole(frame.points.width(), frame.points.height()));
       const SE3<S> T = track_in_volumes(background.backend(), std::vector{terms}, std::vector{background_norm},
                                         std::vector{in_volume}, align, camera_solver(solver, params),
                                         params.retry_tracking,
