@@ -19,6 +19,8 @@ Steps (subcommands):
   run       run the app on each generated sequence (always re-runs)
   report    score the runs and print the table and the summary (numpy only)
   all       generate, run, report
+  errors    per estimate, its position and rotation error against its mover, frame by frame
+            (every --every-th frame and those over --above metres): where tracking went wrong
   selftest  check the metric code on small hand-made cases
 
 Examples:
@@ -566,8 +568,31 @@ def merged_ids(path):
             if any(e.get('event') == 'merged' for e in o.get('events', []))}
 
 
-def evaluate_run(seq, out, kind):
-    """All numbers of one run: camera ATE, per truth object, false objects."""
+def frame_errors(est_cam, gt_cam, est_obj, gt_obj):
+    """Per common frame of an estimate and a truth object, in time order: (t, position error m,
+    rotation error degrees) in the camera frame, the estimate carried by the constant object-frame
+    offset of its first common frame (as object_ate): where tracking drifted, jumped or turned."""
+    import numpy as np
+    m = associate(est_obj[0], gt_obj[0])
+    m.sort(key=lambda p: gt_obj[0][p[1]])
+    C, rows = None, []
+    for e, g in m:
+        ec, gc = camera_at(est_cam, est_obj[0][e]), camera_at(gt_cam, gt_obj[0][g])
+        if ec is None or gc is None:
+            continue
+        if C is None:
+            C = np.linalg.inv(est_obj[1][e]) @ est_cam[1][ec] @ np.linalg.inv(gt_cam[1][gc]) @ gt_obj[1][g]
+        pe = np.linalg.inv(est_cam[1][ec]) @ est_obj[1][e] @ C
+        pg = np.linalg.inv(gt_cam[1][gc]) @ gt_obj[1][g]
+        R = pe[:3, :3].T @ pg[:3, :3]
+        angle = float(np.degrees(np.arccos(np.clip((np.trace(R) - 1) / 2, -1, 1))))
+        rows.append((float(gt_obj[0][g]), float(np.linalg.norm(pe[:3, 3] - pg[:3, 3])), angle))
+    return rows
+
+
+def load_run(seq, out):
+    """A run's trajectories beside its sequence's truth: labels, frame times, fps, cameras, truth
+    objects, estimates (merged ones left out) and their classes."""
     import numpy as np
     labels = json.load(open(os.path.join(seq, 'bench_labels.json')))
     info = json.load(open(os.path.join(seq, 'dyngen.json')))
@@ -587,6 +612,12 @@ def evaluate_run(seq, out, kind):
         classes[i] = r[1]
         p = os.path.join(out, 'objects', '%d.txt' % i)
         estimates[i] = read_tum(p) if os.path.isfile(p) else (np.zeros(0), np.zeros((0, 4, 4)))
+    return labels, frame_t, fps, gt_cam, est_cam, truth, estimates, classes
+
+
+def evaluate_run(seq, out, kind):
+    """All numbers of one run: camera ATE, per truth object, false objects."""
+    labels, frame_t, fps, gt_cam, est_cam, truth, estimates, classes = load_run(seq, out)
     by, unmatched = match_objects(est_cam, gt_cam, estimates, truth)
     res = dict(camera_ate=camera_ate(est_cam, gt_cam), frames=len(frame_t), objects=[],
                false_objects=len(unmatched), false_object_frames=sum(len(estimates[i][0]) for i in unmatched),
@@ -757,6 +788,29 @@ def print_table(hdr, rows, markdown):
 
 # ----------------------------------------------------------------------------- self-test
 
+def errors(args, seqs):
+    """Per estimate and frame, its error against the mover it is matched to (frame_errors): every
+    --every-th frame, and every frame whose position error exceeds --above metres."""
+    import numpy as np
+    for s in seqs:
+        seq, out = seq_dir(args.work, s), run_dir(args.work, s, args.backend + args.tag)
+        if not os.path.isfile(os.path.join(seq, 'bench_labels.json')) or \
+                not os.path.isfile(os.path.join(out, 'camera.txt')):
+            log('[errors] %s: not generated or no run for backend %s%s' % (s['name'], args.backend, args.tag))
+            continue
+        labels, frame_t, fps, gt_cam, est_cam, truth, estimates, classes = load_run(seq, out)
+        by, _ = match_objects(est_cam, gt_cam, estimates, truth)
+        for n in labels['objects']:
+            for i in by.get(n, []):
+                rows = frame_errors(est_cam, gt_cam, estimates[i], truth[n])
+                print('%s: %s <- estimate %d (%s), %d frames' % (s['name'], n, i, classes[i], len(rows)))
+                for k, (t, err, angle) in enumerate(rows):
+                    frame = int(np.argmin(np.abs(frame_t - t)))
+                    if k % args.every == 0 or err > args.above:
+                        print('  frame %5d  position %7.2f cm  rotation %6.1f deg' % (frame, 100 * err, angle))
+    return 0
+
+
 def selftest():
     """Checks of the metric code on small constructed cases."""
     import numpy as np
@@ -848,6 +902,18 @@ def selftest():
     eo2[1::2, :3, 3] += np.linalg.inv(W)[:3, :3] @ [0.02, 0, 0]
     a, _ = object_ate((t, ec), (t, gc), (t, eo2), (t, go))
     assert 0.009 < a <= 0.01 + 1e-12, a
+    # per-frame errors: none for the exact estimate; for eo2, 2 cm at the odd frames, in the
+    # camera frame, and no turn
+    rows = frame_errors((t, ec), (t, gc), (t, eo), (t, go))
+    assert len(rows) == n and max(r[1] for r in rows) < 1e-9 and max(r[2] for r in rows) < 1e-4, rows
+    rows = frame_errors((t, ec), (t, gc), (t, eo2), (t, go))
+    assert [abs(r[1] - (0.02 if i % 2 else 0)) < 1e-9 for i, r in enumerate(rows)] == [True] * n, rows
+    assert max(r[2] for r in rows) < 1e-4
+    # an estimate turned by 10 degrees from frame 10 on, about its own origin
+    eo3 = eo.copy()
+    eo3[10:] = np.einsum('nij,jk->nik', eo[10:], pose(rot([0, 0, 1], np.radians(10)), [0, 0, 0]))
+    rows = frame_errors((t, ec), (t, gc), (t, eo3), (t, go))
+    assert all(abs(r[2] - (10 if i >= 10 else 0)) < 1e-3 for i, r in enumerate(rows)), rows
     # matching: the estimate goes to the nearer truth object, a far one to none
     go_far = go.copy()
     go_far[:, :3, 3] += [0.5, 0, 0]
@@ -876,7 +942,7 @@ def main():
         write_labels_summary(sys.argv[2])
         return 0
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument('step', choices=['list', 'generate', 'export', 'run', 'report', 'all', 'selftest'])
+    ap.add_argument('step', choices=['list', 'generate', 'export', 'run', 'report', 'all', 'errors', 'selftest'])
     ap.add_argument('--work', default=os.path.join(HERE, 'out'),
                     help='folder for sequences and runs (default bench/out, git-ignored)')
     ap.add_argument('--app', default=os.path.join(REPO, 'build', 'examples', 'emfusion'),
@@ -890,6 +956,9 @@ def main():
     ap.add_argument('--to', default=None, help='export: the folder to copy the sequences to')
     ap.add_argument('--markdown', action='store_true', help='print the table as markdown')
     ap.add_argument('--json', default=None, help='also write the scored results to this file')
+    ap.add_argument('--every', type=int, default=10, help='errors: print every n-th frame (default 10)')
+    ap.add_argument('--above', type=float, default=0.05,
+                    help='errors: and every frame whose position error exceeds this, metres (default 0.05)')
     ap.add_argument('--tag', default='', help='run and report: a name for this set of runs (runs/<backend><tag>/), '
                     'so that runs with other --app-arg settings sit side by side, e.g. --tag=-predict')
     ap.add_argument('--app-arg', dest='app_args', action='append', default=[],
@@ -923,6 +992,8 @@ def main():
         export(args, seqs)
     if args.step in ('run', 'all'):
         run(args, seqs)
+    if args.step == 'errors':
+        return errors(args, seqs)
     if args.step in ('report', 'all'):
         return report(args, seqs)
     return 0
