@@ -457,21 +457,26 @@ def origin_distance(est_cam, gt_cam, est_obj, gt_obj):
     return (total / n if n else float('inf')), n
 
 
+def object_offset(est_cam, gt_cam, est_obj, gt_obj, m):
+    """The constant object-frame offset C that takes the estimate onto the truth through the cameras
+    at the first pair of `m` (associated pose indices, in time order) with both cameras; None if
+    there is none."""
+    import numpy as np
+    for e, g in m:
+        ec, gc = camera_at(est_cam, est_obj[0][e]), camera_at(gt_cam, gt_obj[0][g])
+        if ec is not None and gc is not None:
+            return np.linalg.inv(est_obj[1][e]) @ est_cam[1][ec] @ np.linalg.inv(gt_cam[1][gc]) @ gt_obj[1][g]
+    return None
+
+
 def object_ate(est_cam, gt_cam, est_obj, gt_obj):
     """Object ATE (eval/object_ate.hpp): offset C through the cameras at the first common frame,
     then the rigid ATE of est_obj(t) C against gt_obj(t). Returns (rmse, matched) or None."""
-    import numpy as np
     m = associate(est_obj[0], gt_obj[0])
     if len(m) < 3:
         return None
     m.sort(key=lambda p: gt_obj[0][p[1]])
-    Cm = None
-    for e, g in m:
-        ec, gc = camera_at(est_cam, est_obj[0][e]), camera_at(gt_cam, gt_obj[0][g])
-        if ec is None or gc is None:
-            continue
-        Cm = np.linalg.inv(est_obj[1][e]) @ est_cam[1][ec] @ np.linalg.inv(gt_cam[1][gc]) @ gt_obj[1][g]
-        break
+    Cm = object_offset(est_cam, gt_cam, est_obj, gt_obj, m)
     if Cm is None:
         return None
     est_pos = [(est_obj[1][e] @ Cm)[:3, 3] for e, _ in m]
@@ -575,13 +580,11 @@ def frame_errors(est_cam, gt_cam, est_obj, gt_obj):
     import numpy as np
     m = associate(est_obj[0], gt_obj[0])
     m.sort(key=lambda p: gt_obj[0][p[1]])
-    C, rows = None, []
+    C, rows = object_offset(est_cam, gt_cam, est_obj, gt_obj, m), []
     for e, g in m:
         ec, gc = camera_at(est_cam, est_obj[0][e]), camera_at(gt_cam, gt_obj[0][g])
         if ec is None or gc is None:
             continue
-        if C is None:
-            C = np.linalg.inv(est_obj[1][e]) @ est_cam[1][ec] @ np.linalg.inv(gt_cam[1][gc]) @ gt_obj[1][g]
         pe = np.linalg.inv(est_cam[1][ec]) @ est_obj[1][e] @ C
         pg = np.linalg.inv(gt_cam[1][gc]) @ gt_obj[1][g]
         R = pe[:3, :3].T @ pg[:3, :3]

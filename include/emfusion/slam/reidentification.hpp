@@ -131,13 +131,14 @@ std::pair<double, SE3<S>> fit_to_target(const ObjectModel<S, B>& o, const Detect
   const auto& volume = o.volume();
   const S delta = params.huber_voxels * volume.voxel_size();
   const Vec3<S> centre = S(0.5) * volume.view().extent();
-  const auto R = (volume.pose().inverse() * T_world_camera).rotation();
+  const SE3<S> last_seen = volume.pose().inverse() * T_world_camera;  // T_volume_camera at its last pose
+  const auto R = last_seen.rotation();
   const S step = volume.view().extent().x() / S(16);
   double best_inliers = 0, to_beat = 0;
   SE3<S> best_T;
   for (int h = -1; h < 4; ++h) {
-    const Vec3<S> at = target.centroid + (S(h) * step) * target.ray;
-    const SE3<S> start = h < 0 ? volume.pose().inverse() * T_world_camera : SE3<S>(R, centre - R * at);
+    const SE3<S> start =
+        h < 0 ? last_seen : SE3<S>(R, centre - R * (target.centroid + (S(h) * step) * target.ray));
     SolveReport report;
     const SE3<S> T = align_in_volume(volume, frame.points, &target.mask, start, scaled_norm(norm, volume.voxel_size()),
                                      align, solver, &report);
