@@ -967,6 +967,8 @@ def main():
     ap.add_argument('--app-arg', dest='app_args', action='append', default=[],
                     help='extra argument for `emfusion run` (repeatable, e.g. --app-arg=--set --app-arg=key=value)')
     args = ap.parse_args()
+    if args.every < 1:
+        ap.error('--every must be at least 1 (got %d)' % args.every)
     args.work = os.path.abspath(args.work)
     args.app = os.path.abspath(args.app)
 
