@@ -738,6 +738,9 @@ TEMPLATE_LIST_TEST_CASE("Every object's pixel counts in one pass equal each obje
         CHECK(all[std::size_t(k)].rendered == one.rendered);
         CHECK(all[std::size_t(k)].rendered_inner == one.rendered_inner);
         CHECK(all[std::size_t(k)].associated_inner == one.associated_inner);
+        CHECK(all[std::size_t(k)].associated == one.associated);
+        CHECK(one.associated >= one.associated_inner);
+        if (border == 0) CHECK(one.associated == one.associated_inner);
         CHECK(all[std::size_t(k)].association_sum == Approx(one.association_sum).epsilon(1e-12));
         CHECK(one.rendered > 0);
         CHECK((k == objects - 1) == (one.associated_inner == 0));

@@ -29,14 +29,15 @@
 namespace emfusion {
 
 /// What the deletion rules count of one object over the image: its
-/// rendered pixels, the association summed over them, and the pixels inside
-/// the visibility border that it renders or that the E-step gives it (q > 0.5).
+/// rendered pixels, the association summed over them, the pixels inside
+/// the visibility border that it renders or that the E-step gives it (q >
+/// 0.5), and those the E-step gives it anywhere.
 struct ObjectPixels {
   double association_sum = 0;
-  int rendered = 0, rendered_inner = 0, associated_inner = 0;
+  int rendered = 0, rendered_inner = 0, associated_inner = 0, associated = 0;
   EMF_HD ObjectPixels operator+(const ObjectPixels& o) const {
     return {association_sum + o.association_sum, rendered + o.rendered, rendered_inner + o.rendered_inner,
-            associated_inner + o.associated_inner};
+            associated_inner + o.associated_inner, associated + o.associated};
   }
 };
 
@@ -57,6 +58,7 @@ struct CountObjectPixels {
     p.rendered = drawn ? 1 : 0;
     p.rendered_inner = drawn && inner ? 1 : 0;
     p.associated_inner = inner && q > S(0.5) ? 1 : 0;
+    p.associated = q > S(0.5) ? 1 : 0;
     return p;
   }
 };
@@ -65,11 +67,11 @@ struct AddObjectPixels {
   EMF_HD ObjectPixels operator()(const ObjectPixels& a, const ObjectPixels& b) const { return a + b; }
 };
 
-/// ObjectPixels as four doubles (counts below 2^53 are exact), the form
+/// ObjectPixels as five doubles (counts below 2^53 are exact), the form
 /// grouped_accumulate sums.
 struct PixelSums {
-  static constexpr int components = 4;
-  double v[components] = {0, 0, 0, 0};
+  static constexpr int components = 5;
+  double v[components] = {0, 0, 0, 0, 0};
   EMF_HD double& component(int c) { return v[c]; }
   EMF_HD double component(int c) const { return v[c]; }
   EMF_HD PixelSums& operator+=(const PixelSums& o) {
@@ -77,7 +79,7 @@ struct PixelSums {
     return *this;
   }
   ObjectPixels counts() const {
-    return {v[0], int(v[1]), int(v[2]), int(v[3])};
+    return {v[0], int(v[1]), int(v[2]), int(v[3]), int(v[4])};
   }
 };
 
@@ -90,6 +92,7 @@ struct AddObjectPixel {
     const ObjectPixels p = CountObjectPixels<S>{label, q, g + 1, border}(i);
     acc.v[0] += p.association_sum;
     acc.v[1] += double(p.rendered), acc.v[2] += double(p.rendered_inner), acc.v[3] += double(p.associated_inner);
+    acc.v[4] += double(p.associated);
   }
 };
 
@@ -137,6 +140,46 @@ std::vector<ObjectPixels> all_object_pixels(const Frame<S, B>& frame, int count,
                                           detail::lifecycle::PixelSums{}, ws))
     out.push_back(sum.counts());
   return out;
+}
+
+/// The grace's other half (SystemParams::hold_unseen_objects): after
+/// track_objects, the young objects (Map::young) that this frame's E-step
+/// shows cut by the image border or gone from it (fewer than
+/// keep_mask_pixels of their association above 1/2 inside the visibility
+/// border, and less there than in the border band, or fewer in all than
+/// min_object_terms) go back to the pose they had before the frame
+/// (`before`), their outcome not_tracked. A small object wholly in view is
+/// tracked as ever. The association
+/// is the frame's own, from before the objects' solves; the segmentation
+/// is the last frame's, whose labels may no longer be the objects' order,
+/// so it is not used. One pass over the frame on frames with young objects,
+/// none on the others. Returns how many were held.
+template <class S, Backend B>
+int hold_unseen_objects(Map<S, B>& map, const Frame<S, B>& frame, const SystemParams<S>& params,
+                        const std::vector<SE3<S>>& before, std::vector<PoseTrack>& tracks,
+                        ObjectPixelsWorkspace<S, B>* workspace = nullptr) {
+  const int n = int(map.objects.size());
+  detail::require(int(before.size()) == n && int(tracks.size()) == n, "hold_unseen_objects",
+                  "need one pose and one track per live object");
+  const auto young = [&](int id) { return std::find(map.young.begin(), map.young.end(), id) != map.young.end(); };
+  bool any = false;
+  for (const auto& o : map.objects) any = any || young(o->id());
+  if (!params.hold_unseen_objects || !any) return 0;
+  ObjectPixelsWorkspace<S, B> local;
+  const std::vector<ObjectPixels> pixels = all_object_pixels(
+      frame, n, params.visibility_border_for(frame.segmentation.width()), workspace ? *workspace : local);
+  const int min_pixels = params.keep_mask_pixels_for(frame.segmentation.width(), frame.segmentation.height());
+  int held = 0;
+  for (int k = 0; k < n; ++k) {
+    ObjectModel<S, B>& o = *map.objects[std::size_t(k)];
+    const ObjectPixels& px = pixels[std::size_t(k)];
+    const bool cut = 2 * px.associated_inner < px.associated, gone = px.associated < params.min_object_terms;
+    if (!young(o.id()) || px.associated_inner >= min_pixels || !(cut || gone)) continue;
+    o.restore_pose(before[std::size_t(k)]);
+    tracks[std::size_t(k)].outcome = TrackingOutcome::not_tracked;
+    ++held;
+  }
+  return held;
 }
 
 /// What tracking did with Map::objects[k] this frame and what the deletion

@@ -171,6 +171,13 @@ struct SystemParams {
   /// again: one that enters the view across the image border would
   /// otherwise go on the next frame.
   bool young_object_grace = true;
+  /// During that grace, an object the frame shows cut by the image border
+  /// or no longer shows (fewer than keep_mask_pixels of its E-step
+  /// association inside the visibility border, and less there than in the
+  /// border band, or fewer in all than min_object_terms) is not
+  /// tracked: it keeps the pose it was found at instead of following the
+  /// few pixels left of it at the border.
+  bool hold_unseen_objects = true;
 
   // Rendering (sec. 3.5).
   S min_foreground = S(0.5);     ///< object voxels render where p_fg exceeds this

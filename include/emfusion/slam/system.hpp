@@ -240,6 +240,9 @@ class System {
       clock_.lap(result.times.e_step);
       frame_.object_tracks = track_objects(map_, frame_, params_, parts_.object_norm, parts_.solver,
                                            &tracking_workspace_, &object_starts);
+      std::vector<SE3<S>> before;
+      for (const PoseStarts<S>& s : object_starts) before.push_back(s.previous);
+      hold_unseen_objects(map_, frame_, params_, before, frame_.object_tracks, &object_pixels_workspace_);
       for (const PoseTrack& t : frame_.object_tracks) result.objects.push_back(t.report);
       clock_.lap(result.times.track_objects);
     }
