@@ -789,7 +789,7 @@ def print_table(hdr, rows, markdown):
         print('  '.join(str(x).ljust(w[i]) for i, x in enumerate(r)))
 
 
-# ----------------------------------------------------------------------------- self-test
+# ----------------------------------------------------------------------------- errors
 
 def errors(args, seqs):
     """Per estimate and frame, its error against the mover it is matched to (frame_errors): every
@@ -813,6 +813,8 @@ def errors(args, seqs):
                         print('  frame %5d  position %7.2f cm  rotation %6.1f deg' % (frame, 100 * err, angle))
     return 0
 
+
+# ----------------------------------------------------------------------------- self-test
 
 def selftest():
     """Checks of the metric code on small constructed cases."""

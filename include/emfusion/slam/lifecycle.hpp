@@ -7,7 +7,10 @@
 // associated is kept as lost for re-identification (an extension of the
 // paper; docs/system.md, "Lost objects"): the first is out of sight, the
 // second is drawn where the camera no longer sees it, as after a fast move
-// its tracking could not follow.
+// its tracking could not follow. Objects created or re-identified on a
+// detector frame are spared the visibility rule until first seen, and not
+// tracked meanwhile while the image border cuts them (hold_unseen_objects,
+// which System runs right after tracking the objects).
 #pragma once
 
 #include <algorithm>
@@ -149,11 +152,11 @@ std::vector<ObjectPixels> all_object_pixels(const Frame<S, B>& frame, int count,
 /// border, and less there than in the border band, or fewer in all than
 /// min_object_terms) go back to the pose they had before the frame
 /// (`before`), their outcome not_tracked. A small object wholly in view is
-/// tracked as ever. The association
-/// is the frame's own, from before the objects' solves; the segmentation
-/// is the last frame's, whose labels may no longer be the objects' order,
-/// so it is not used. One pass over the frame on frames with young objects,
-/// none on the others. Returns how many were held.
+/// tracked as ever. The association is the frame's own, from before the
+/// objects' solves; the segmentation is the last frame's, whose labels may
+/// no longer be the objects' order, so it is not used. One pass over the
+/// frame on frames with young objects, none on the others. Returns how
+/// many were held.
 template <class S, Backend B>
 int hold_unseen_objects(Map<S, B>& map, const Frame<S, B>& frame, const SystemParams<S>& params,
                         const std::vector<SE3<S>>& before, std::vector<PoseTrack>& tracks,
@@ -161,9 +164,8 @@ int hold_unseen_objects(Map<S, B>& map, const Frame<S, B>& frame, const SystemPa
   const int n = int(map.objects.size());
   detail::require(int(before.size()) == n && int(tracks.size()) == n, "hold_unseen_objects",
                   "need one pose and one track per live object");
-  const auto young = [&](int id) { return std::find(map.young.begin(), map.young.end(), id) != map.young.end(); };
   bool any = false;
-  for (const auto& o : map.objects) any = any || young(o->id());
+  for (const auto& o : map.objects) any = any || map.is_young(o->id());
   if (!params.hold_unseen_objects || !any) return 0;
   ObjectPixelsWorkspace<S, B> local;
   const std::vector<ObjectPixels> pixels = all_object_pixels(
@@ -174,7 +176,7 @@ int hold_unseen_objects(Map<S, B>& map, const Frame<S, B>& frame, const SystemPa
     ObjectModel<S, B>& o = *map.objects[std::size_t(k)];
     const ObjectPixels& px = pixels[std::size_t(k)];
     const bool cut = 2 * px.associated_inner < px.associated, gone = px.associated < params.min_object_terms;
-    if (!young(o.id()) || px.associated_inner >= min_pixels || !(cut || gone)) continue;
+    if (!map.is_young(o.id()) || px.associated_inner >= min_pixels || !(cut || gone)) continue;
     o.restore_pose(before[std::size_t(k)]);
     tracks[std::size_t(k)].outcome = TrackingOutcome::not_tracked;
     ++held;
@@ -233,7 +235,6 @@ void delete_objects(Map<S, B>& map, const Frame<S, B>& frame, const SystemParams
   const int min_pixels = params.keep_mask_pixels_for(frame.segmentation.width(), frame.segmentation.height());
   // Grace lasts until the object is first seen or the detector runs again.
   if (detector_frame) map.young.clear();
-  const auto young = [&](int id) { return std::find(map.young.begin(), map.young.end(), id) != map.young.end(); };
   std::vector<DeletionReason> why(map.objects.size(), DeletionReason::none);
   const bool associated = params.use_association && tracked;
   for (int k = 0; k < old_objects; ++k) {
@@ -242,7 +243,7 @@ void delete_objects(Map<S, B>& map, const Frame<S, B>& frame, const SystemParams
     const bool visible = status.visible_pixels >= min_pixels;
     if (detector_frame && o.existence_probability() < params.min_existence)
       why[std::size_t(k)] = DeletionReason::existence;
-    else if (!params.ignores(o.class_name()) && !visible && !young(o.id()))
+    else if (!params.ignores(o.class_name()) && !visible && !map.is_young(o.id()))
       why[std::size_t(k)] = DeletionReason::not_visible;
     else if (visible && status.mean_association < params.min_association)
       why[std::size_t(k)] = DeletionReason::weak_association;

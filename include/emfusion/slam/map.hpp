@@ -58,6 +58,8 @@ struct Map {
   /// Ids created or re-identified on the last detector frame: spared the
   /// visibility rule until first seen (SystemParams::young_object_grace).
   std::vector<int> young;
+  /// True if object `id` is among the young ones.
+  bool is_young(int id) const { return std::find(young.begin(), young.end(), id) != young.end(); }
   std::vector<ObjectRecord> records;  ///< every object ever created, in creation order
   int next_id = 1;
 
