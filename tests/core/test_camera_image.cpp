@@ -1,8 +1,10 @@
 // Pinhole projection and back-projection, images across backends, the
-// parallel primitives, and pixel boxes (projected_box, for_each_pixel_in),
-// for every scalar and backend.
+// parallel primitives, and pixel boxes (projected_box, for_each_pixel_in,
+// for_each_pixel_tiled), for every scalar and backend.
+#include <algorithm>
 #include <cmath>
 #include <stdexcept>
+#include <utility>
 #include <vector>
 
 #include "emfusion/core/camera.hpp"
@@ -183,6 +185,39 @@ TEST_CASE("projected_box holds every pixel a box can project to, and little more
   const PixelBox around = projected_box(camera, SE3<S>::translation(vec3(S(-0.2), S(-0.15), S(-0.1))), lo, hi);
   CHECK((around.x0 == 0 && around.y0 == 0 && around.x1 == camera.width && around.y1 == camera.height));
   CHECK(projected_box(camera, SE3<S>::translation(vec3(S(5), S(0), S(1))), lo, hi).empty());
+}
+
+TEMPLATE_LIST_TEST_CASE("for_each_pixel_tiled visits every pixel once; a warp's pixels are one 8 x 4 patch", "[core]",
+                        emfusion::test::AllConfigs) {
+  using B = typename TestType::Backend;
+  // Image sizes with partial tiles on either side, and none at all.
+  for (const auto& [w, h] : {std::pair{37, 29}, std::pair{16, 16}, std::pair{1, 1}, std::pair{40, 3}}) {
+    Image<int, B> marks(w, h, 0, B{});
+    for_each_pixel_tiled(B{}, w, h, Mark{marks.view()});
+    for_each_pixel_tiled<3>(B{}, w, h, Mark{marks.view()});
+    for_each_pixel_tiled(B{}, 0, h, Mark{marks.view()});  // nothing
+    const std::vector<int> m = marks.to_host();
+    CHECK(std::count(m.begin(), m.end(), 2) == w * h);
+  }
+  // The mapping itself: every pixel of a tile from one thread, each warp a
+  // compact patch.
+  std::vector<int> seen(PixelTiles::threads * 4, 0);
+  bool compact = true;
+  for (int tile_x = 0; tile_x < 2; ++tile_x)
+    for (int tile_y = 0; tile_y < 2; ++tile_y)
+      for (int warp = 0; warp < PixelTiles::threads / 32; ++warp) {
+        int u_min = 1 << 30, u_max = -1, v_min = 1 << 30, v_max = -1;
+        for (int lane = 0; lane < 32; ++lane) {
+          int u, v;
+          PixelTiles::pixel_of(tile_x, tile_y, warp * 32 + lane, u, v);
+          REQUIRE((u >= tile_x * 16 && u < tile_x * 16 + 16 && v >= tile_y * 16 && v < tile_y * 16 + 16));
+          seen[std::size_t(v * 32 + u)] += 1;
+          u_min = std::min(u_min, u), u_max = std::max(u_max, u), v_min = std::min(v_min, v), v_max = std::max(v_max, v);
+        }
+        compact = compact && u_max - u_min == PixelTiles::warp_w - 1 && v_max - v_min == PixelTiles::warp_h - 1;
+      }
+  CHECK(compact);
+  CHECK(std::count(seen.begin(), seen.end(), 1) == int(seen.size()));
 }
 
 TEMPLATE_LIST_TEST_CASE("for_each_pixel_in visits each pixel of a box once and no other", "[core]",
