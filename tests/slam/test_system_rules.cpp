@@ -5,8 +5,10 @@
 // falls below 0.1 after repeated misses and the object is deleted, objects
 // that leave the view are deleted, kept as lost and re-identified when
 // detected again (with lost_object_frames = 0: gone for good; fitted first
-// from the pose they were lost in and only as far as they can have moved),
-// and a new object at the border survives until seen.
+// from the pose they were lost in and only as far as they can have moved;
+// with refind_in_view found again without a detection where the frame shows
+// them where they were lost), and a new object at the border survives until
+// seen.
 // The two longest (resting, re-identification) run in float only
 // (SystemRuleConfigs, support/configs.hpp).
 #include <algorithm>
@@ -666,3 +668,49 @@ TEMPLATE_LIST_TEST_CASE("A young object not yet visible keeps its pose; once see
   }
 }
 
+
+TEMPLATE_LIST_TEST_CASE("A lost object the frame shows where it was lost comes back without a detection", "[slam]",
+                        emfusion::test::SystemRuleConfigs) {
+  using S = typename TestType::Scalar;
+  using B = typename TestType::Backend;
+  SystemParams<S> params = small_params<S>();
+  params.min_association = 0;  // this test is about the visibility rule (as the re-identification test)
+  params.refind_in_view = true;
+  FirstFrame<S, B> first("cup", 1, params);
+  System<S, B>& sys = first.system;
+  REQUIRE(sys.objects().size() == 1);
+  const SE3<S> start = sys.objects()[0]->pose();
+  const int k = pan_until_deleted(sys, first.scene);
+  REQUIRE(k > 0);
+  REQUIRE(sys.map().lost.size() == 1);
+  // The way back, without a detection: where the box is now decides.
+  const auto pan_back = [&](const BoxScene<S>& now) {
+    int found_at = -1;
+    for (int j = k - 1, frame = k; j >= 0; --j) {
+      const SE3<S> pose = SE3<S>(so3_exp(vec3(S(0), S(0.02) * S(j), S(0))), Vec3<S>::zero());
+      const FrameResult r = sys.process(now.template depth<B>(pose), ++frame / 30.0);
+      CHECK(r.created.empty());
+      if (!r.reidentified.empty() && found_at < 0) {
+        CHECK(r.reidentified == std::vector<int>{1});
+        found_at = j;
+      }
+    }
+    return found_at;
+  };
+  SECTION("the box stood still: it is found on the way back and tracked to where it is") {
+    const int found_at = pan_back(first.scene);
+    INFO("lost at pan step " << k << ", found at step " << found_at);
+    CHECK(found_at >= k - 8);  // once its model shows keep_mask_pixels in view: a few steps
+    REQUIRE(sys.objects().size() == 1);
+    CHECK(sys.objects()[0]->id() == 1);
+    CHECK(sys.map().lost.empty());
+    CHECK_FALSE(sys.object_records()[0].deleted);
+    const Vec3<S> shift = (sys.camera_pose().inverse() * sys.objects()[0]->pose()).translation() - start.translation();
+    CHECK(double(norm(shift)) < 0.01);
+  }
+  SECTION("the box moved 0.3 m while out of view: it stays lost until a detection finds it") {
+    CHECK(pan_back(BoxScene<S>(vec3(S(0.3), S(0), S(1.2)))) < 0);
+    CHECK(sys.objects().empty());
+    CHECK(sys.map().lost.size() == 1);
+  }
+}

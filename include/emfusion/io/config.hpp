@@ -156,6 +156,7 @@ const std::vector<ParameterEntry<S>>& parameter_table() {
                  "merge two models of one object when this share of a detection fits both (0: off)"),
       EMF_BOOL("young_object_grace", young_object_grace, "new objects survive invisibility until the next detection"),
       EMF_BOOL("hold_unseen_objects", hold_unseen_objects, "objects in that grace keep their pose while cut by the image border"),
+      EMF_BOOL("refind_in_view", refind_in_view, "lost objects come back without a detection where the frame shows their model"),
       EMF_NUMBER("min_foreground", min_foreground, "render object voxels above this p_fg"),
       EMF_NUMBER("occlusion_margin", occlusion_margin, "object loses to background this far behind (m)"),
       EMF_BOOL("use_association", use_association, "ablation switch: association likelihoods"),

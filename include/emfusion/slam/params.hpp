@@ -178,6 +178,12 @@ struct SystemParams {
   /// tracked: it keeps the pose it was found at instead of following the
   /// few pixels left of it at the border.
   bool hold_unseen_objects = true;
+  /// Lost objects come back without a detection when the frame shows their
+  /// model where they were lost (refind_in_view, reidentification.hpp):
+  /// an object that left the view, or stood hidden behind another, while
+  /// it did not move, is tracked again from the frame it is back instead
+  /// of from the next detector frame.
+  bool refind_in_view = false;
 
   // Rendering (sec. 3.5).
   S min_foreground = S(0.5);     ///< object voxels render where p_fg exceeds this

@@ -26,6 +26,7 @@
 #include "emfusion/robust/norms.hpp"
 #include "emfusion/slam/association.hpp"
 #include "emfusion/slam/detection_masks.hpp"
+#include "emfusion/slam/frame_result.hpp"
 #include "emfusion/slam/frame.hpp"
 #include "emfusion/slam/map.hpp"
 #include "emfusion/slam/tracking.hpp"
@@ -67,6 +68,35 @@ struct CountDrawnPixels {
     if (!hit[i]) return {0, 0, 1};
     const S z = points[i].z();
     return {1, std::isfinite(z) && std::fabs(z - depth[i]) <= tolerance ? 1 : 0, 1};
+  }
+};
+
+/// Of the pixels inside the visibility border that a lost object's model
+/// draws (`hit`, at `depth`) and no live object claims (`segmentation` 0):
+/// how many show the measured surface within `tolerance` of the model's
+/// (agree), and how many show it further away (behind: the frame sees
+/// through where the model would stand). A nearer surface is an occluder
+/// and counts neither way.
+struct InViewPixels {
+  int agree = 0, behind = 0;
+  EMF_HD InViewPixels operator+(const InViewPixels& o) const { return {agree + o.agree, behind + o.behind}; }
+};
+template <class S>
+struct CountInView {
+  ImageView<const std::uint8_t> hit;
+  ImageView<const S> depth;
+  ImageView<const Vec3<S>> points;
+  ImageView<const int> segmentation;
+  int border;
+  S tolerance;
+  EMF_HD InViewPixels operator()(int i) const {
+    const int u = i % hit.width, v = i / hit.width;
+    if (u < border || v < border || u >= hit.width - border || v >= hit.height - border) return {};
+    if (!hit[i] || segmentation[i] > 0) return {};
+    const S z = points[i].z();
+    if (!std::isfinite(z)) return {};
+    if (std::fabs(z - depth[i]) <= tolerance) return {1, 0};
+    return {0, z > depth[i] ? 1 : 0};
   }
 };
 
@@ -330,6 +360,56 @@ std::vector<int> relocalize_objects(Map<S, B>& map, const Frame<S, B>& frame, co
     moved.push_back(obj.id());
   }
   return moved;
+}
+
+/// Lost objects found again without a detection (params.refind_in_view;
+/// docs/system.md, "Lost objects"), at the end of a frame: each lost object
+/// (not lost this frame) is drawn at the pose it was lost at (surfaces of
+/// p_fg above 1/2, depth only) and comes back to the map, tracked from the
+/// next frame, where at least keep_mask_pixels of the pixels inside the
+/// visibility border that it draws and no live object claims show the
+/// measured surface within likelihood.sigma of its own, and those are at least
+/// reidentify_min_inliers of the ones that do or show a surface behind it.
+/// An object that moved while it was out of view is drawn where the frame
+/// now sees what was behind it, and stays lost until a detection finds it.
+/// The ids found are added to result.reidentified; returns how many.
+template <class S, Backend B>
+int refind_in_view(Map<S, B>& map, const Frame<S, B>& frame, const PinholeCamera<S>& camera,
+                   const SystemParams<S>& params, FrameResult& result) {
+  if (!params.refind_in_view || map.lost.empty()) return 0;
+  const int min_pixels = params.keep_mask_pixels_for(camera.width, camera.height);
+  const int border = params.visibility_border_for(camera.width);
+  RaycastResult<S, B> drawn;
+  RaycastParams<S> rp;
+  rp.surface = false;
+  int found = 0;
+  for (std::size_t k = 0; k < map.lost.size() && int(map.objects.size()) < params.max_objects;) {
+    const ObjectModel<S, B>& o = *map.lost[k].object;
+    if (map.lost[k].lost_at >= map.frames || params.ignores(o.class_name())) {
+      ++k;
+      continue;
+    }
+    const SE3<S> T_volume_camera = (o.pose() * o.T_object_volume()).inverse() * map.T_world_camera;
+    raycast(o.volume(), camera, o.volume().pose() * T_volume_camera, drawn, rp, &o.foreground());
+    const detail::reidentification::InViewPixels n = transform_reduce_index(
+        frame.points.backend(), frame.points.size(),
+        detail::reidentification::CountInView<S>{std::as_const(drawn.hit).view(), std::as_const(drawn.depth).view(),
+                                                 frame.points.view(), frame.segmentation.view(), border, params.likelihood.sigma},
+        detail::reidentification::InViewPixels{}, thrust::plus<detail::reidentification::InViewPixels>());
+    if (n.agree < min_pixels || double(n.agree) < double(params.reidentify_min_inliers) * (n.agree + n.behind)) {
+      ++k;
+      continue;
+    }
+    std::unique_ptr<ObjectModel<S, B>> obj = std::move(map.lost[k].object);
+    map.lost.erase(map.lost.begin() + std::ptrdiff_t(k));
+    ObjectRecord& rec = map.record_of(obj->id());
+    rec.deleted = false;
+    rec.reason = DeletionReason::none;
+    result.reidentified.push_back(obj->id());
+    map.objects.push_back(std::move(obj));
+    ++found;
+  }
+  return found;
 }
 
 }  // namespace emfusion
