@@ -47,9 +47,20 @@ struct OffSurfaceCount {
   EMF_HD S weight(S) const { return S(1); }
 };
 
-/// Of the pixels of a detection (`mask`) that an object's model draws
-/// (`hit`, at `depth`), how many show the measured surface within
-/// `tolerance` of the model's.
+/// An object's model drawn into the frame (`hit`, at `depth`: a depth-only
+/// raycast) beside the frame's measured points.
+template <class S>
+struct ModelInFrame {
+  ImageView<const std::uint8_t> hit;
+  ImageView<const S> depth;
+  ImageView<const Vec3<S>> points;
+  /// The measured depth at pixel i less the model's there (not finite where
+  /// nothing was measured); only where hit[i].
+  EMF_HD S gap(int i) const { return points[i].z() - depth[i]; }
+};
+
+/// Of the pixels of a detection (`mask`) that an object's model draws, how
+/// many show the measured surface within `tolerance` of the model's.
 struct DrawnPixels {
   int drawn = 0, agree = 0, masked = 0;
   EMF_HD DrawnPixels operator+(const DrawnPixels& o) const {
@@ -58,45 +69,40 @@ struct DrawnPixels {
 };
 template <class S>
 struct CountDrawnPixels {
-  ImageView<const std::uint8_t> hit;
-  ImageView<const S> depth;
-  ImageView<const Vec3<S>> points;
+  ModelInFrame<S> model;
   ImageView<const S> mask;
   S tolerance;
   EMF_HD DrawnPixels operator()(int i) const {
     if (!(mask[i] > S(0))) return {};
-    if (!hit[i]) return {0, 0, 1};
-    const S z = points[i].z();
-    return {1, std::isfinite(z) && std::fabs(z - depth[i]) <= tolerance ? 1 : 0, 1};
+    if (!model.hit[i]) return {0, 0, 1};
+    const S gap = model.gap(i);
+    return {1, std::isfinite(gap) && std::fabs(gap) <= tolerance ? 1 : 0, 1};
   }
 };
 
 /// Of the pixels inside the visibility border that a lost object's model
-/// draws (`hit`, at `depth`) and no live object claims (`segmentation` 0):
-/// how many show the measured surface within `tolerance` of the model's
-/// (agree), and how many show it further away (behind: the frame sees
-/// through where the model would stand). A nearer surface is an occluder
-/// and counts neither way.
+/// draws and no live object claims (`segmentation` 0): how many show the
+/// measured surface within `tolerance` of the model's (agree), and how many
+/// show it further away (behind: the frame sees through where the model
+/// would stand). A nearer surface is an occluder and counts neither way.
 struct InViewPixels {
   int agree = 0, behind = 0;
   EMF_HD InViewPixels operator+(const InViewPixels& o) const { return {agree + o.agree, behind + o.behind}; }
 };
 template <class S>
 struct CountInView {
-  ImageView<const std::uint8_t> hit;
-  ImageView<const S> depth;
-  ImageView<const Vec3<S>> points;
+  ModelInFrame<S> model;
   ImageView<const int> segmentation;
   int border;
   S tolerance;
   EMF_HD InViewPixels operator()(int i) const {
-    const int u = i % hit.width, v = i / hit.width;
-    if (u < border || v < border || u >= hit.width - border || v >= hit.height - border) return {};
-    if (!hit[i] || segmentation[i] > 0) return {};
-    const S z = points[i].z();
-    if (!std::isfinite(z)) return {};
-    if (std::fabs(z - depth[i]) <= tolerance) return {1, 0};
-    return {0, z > depth[i] ? 1 : 0};
+    const int width = segmentation.width, u = i % width, v = i / width;
+    if (u < border || v < border || u >= width - border || v >= segmentation.height - border) return {};
+    if (!model.hit[i] || segmentation[i] > 0) return {};
+    const S gap = model.gap(i);
+    if (!std::isfinite(gap)) return {};
+    if (std::fabs(gap) <= tolerance) return {1, 0};
+    return {0, gap > S(0) ? 1 : 0};
   }
 };
 
@@ -220,8 +226,9 @@ bool consistent_with_frame(const ObjectModel<S, B>& o, const SE3<S>& T_volume_ca
   raycast(o.volume(), camera, o.volume().pose() * T_volume_camera, drawn, rp, &o.foreground());
   const DrawnPixels n = transform_reduce_index(
       frame.points.backend(), frame.points.size(),
-      CountDrawnPixels<S>{std::as_const(drawn.hit).view(), std::as_const(drawn.depth).view(), frame.points.view(),
-                          mask.view(), o.volume().truncation()},
+      CountDrawnPixels<S>{{std::as_const(drawn.hit).view(), std::as_const(drawn.depth).view(), frame.points.view()},
+                          mask.view(),
+                          o.volume().truncation()},
       DrawnPixels{}, thrust::plus<DrawnPixels>());
   return n.drawn > 0 && 2 * n.drawn >= n.masked && 2 * n.agree >= n.drawn;
 }
@@ -393,8 +400,11 @@ int refind_in_view(Map<S, B>& map, const Frame<S, B>& frame, const PinholeCamera
     raycast(o.volume(), camera, o.volume().pose() * T_volume_camera, drawn, rp, &o.foreground());
     const detail::reidentification::InViewPixels n = transform_reduce_index(
         frame.points.backend(), frame.points.size(),
-        detail::reidentification::CountInView<S>{std::as_const(drawn.hit).view(), std::as_const(drawn.depth).view(),
-                                                 frame.points.view(), frame.segmentation.view(), border, params.likelihood.sigma},
+        detail::reidentification::CountInView<S>{
+            {std::as_const(drawn.hit).view(), std::as_const(drawn.depth).view(), frame.points.view()},
+            frame.segmentation.view(),
+            border,
+            params.likelihood.sigma},
         detail::reidentification::InViewPixels{}, thrust::plus<detail::reidentification::InViewPixels>());
     if (n.agree < min_pixels || double(n.agree) < double(params.reidentify_min_inliers) * (n.agree + n.behind)) {
       ++k;
