@@ -339,6 +339,9 @@ TEMPLATE_LIST_TEST_CASE("An object that left the view is re-identified when dete
   // Near the border the weak-association rule may take the object first
   // (on some backends): this test is about the visibility rule.
   params.min_association = 0;
+  // It is about re-identification by a detection: on the way back the box
+  // stands where it was lost, and refind_in_view would find it first.
+  params.refind_in_view = false;
   FirstFrame<S, B> first("cup", 1, params);
   System<S, B>& sys = first.system;
   const BoxScene<S>& scene = first.scene;
