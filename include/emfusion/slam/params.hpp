@@ -183,7 +183,7 @@ struct SystemParams {
   /// an object that left the view, or stood hidden behind another, while
   /// it did not move, is tracked again from the frame it is back instead
   /// of from the next detector frame.
-  bool refind_in_view = false;
+  bool refind_in_view = true;
 
   // Rendering (sec. 3.5).
   S min_foreground = S(0.5);     ///< object voxels render where p_fg exceeds this

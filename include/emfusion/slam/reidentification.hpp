@@ -20,6 +20,7 @@
 
 #include <thrust/functional.h>
 
+#include "emfusion/core/pixel_box.hpp"
 #include "emfusion/detect/detection.hpp"
 #include "emfusion/detect/matching.hpp"
 #include "emfusion/detect/proposal.hpp"
@@ -103,6 +104,17 @@ struct CountInView {
     if (!std::isfinite(gap)) return {};
     if (std::fabs(gap) <= tolerance) return {1, 0};
     return {0, gap > S(0) ? 1 : 0};
+  }
+};
+/// CountInView over the pixels of `box` (k: the k-th pixel of the box, row
+/// by row).
+template <class S>
+struct CountInBox {
+  CountInView<S> count;
+  PixelBox box;
+  EMF_HD InViewPixels operator()(int k) const {
+    const int w = box.x1 - box.x0;
+    return count((box.y0 + k / w) * count.segmentation.width + box.x0 + k % w);
   }
 };
 
@@ -371,7 +383,8 @@ std::vector<int> relocalize_objects(Map<S, B>& map, const Frame<S, B>& frame, co
 
 /// Lost objects found again without a detection (params.refind_in_view;
 /// docs/system.md, "Lost objects"), at the end of a frame: each lost object
-/// (not lost this frame) is drawn at the pose it was lost at (surfaces of
+/// (not lost this frame) whose volume projects to at least keep_mask_pixels
+/// pixels is drawn at the pose it was lost at (surfaces of
 /// p_fg above 1/2, depth only) and comes back to the map, tracked from the
 /// next frame, where at least keep_mask_pixels of the pixels inside the
 /// visibility border that it draws and no live object claims show the
@@ -397,14 +410,23 @@ int refind_in_view(Map<S, B>& map, const Frame<S, B>& frame, const PinholeCamera
       continue;
     }
     const SE3<S> T_volume_camera = (o.pose() * o.T_object_volume()).inverse() * map.T_world_camera;
+    // Only the pixels its volume projects to can show it: none when it is
+    // out of view (no cast, no count).
+    const PixelBox box =
+        projected_box(camera, T_volume_camera.inverse(), Vec3<S>::zero(), o.volume().view().extent());
+    if (box.area() < min_pixels) {
+      ++k;
+      continue;
+    }
     raycast(o.volume(), camera, o.volume().pose() * T_volume_camera, drawn, rp, &o.foreground());
     const detail::reidentification::InViewPixels n = transform_reduce_index(
-        frame.points.backend(), frame.points.size(),
-        detail::reidentification::CountInView<S>{
-            {std::as_const(drawn.hit).view(), std::as_const(drawn.depth).view(), frame.points.view()},
-            frame.segmentation.view(),
-            border,
-            params.likelihood.sigma},
+        frame.points.backend(), box.area(),
+        detail::reidentification::CountInBox<S>{
+            {{std::as_const(drawn.hit).view(), std::as_const(drawn.depth).view(), frame.points.view()},
+             frame.segmentation.view(),
+             border,
+             params.likelihood.sigma},
+            box},
         detail::reidentification::InViewPixels{}, thrust::plus<detail::reidentification::InViewPixels>());
     if (n.agree < min_pixels || double(n.agree) < double(params.reidentify_min_inliers) * (n.agree + n.behind)) {
       ++k;

@@ -169,7 +169,7 @@ class System {
       result.merged = merge_objects(map_, frame_, *det, seg, update.object_of_detection, ids_drawn, camera_, params_,
                                     parts_.object_norm, parts_.solver);
     // Lost objects that the frame shows where they were lost come back
-    // (refind_in_view; off by default).
+    // (refind_in_view).
     refind_in_view(map_, frame_, camera_, params_, result);
     // Deleted and resized (detector frames) object volumes are freed memory
     // the C library may keep; on the CPU that is resident memory.
