@@ -671,7 +671,6 @@ TEMPLATE_LIST_TEST_CASE("A young object not yet visible keeps its pose; once see
   }
 }
 
-
 TEMPLATE_LIST_TEST_CASE("A lost object the frame shows where it was lost comes back without a detection", "[slam]",
                         emfusion::test::SystemRuleConfigs) {
   using S = typename TestType::Scalar;

@@ -67,15 +67,16 @@ PixelBox projected_box(const PinholeCamera<S>& camera, const SE3<S>& T_camera_bo
 }
 
 namespace detail {
-/// f(i) for the image index i of every pixel of `box` (image `width` wide).
+/// f(i) for the image index i of the k-th pixel of `box` (row by row;
+/// image `width` wide), and what f returns (a reduction's term).
 template <class F>
 struct PixelsInBox {
   F f;
   PixelBox box;
   int width;
-  EMF_HD void operator()(int k) const {
+  EMF_HD decltype(auto) operator()(int k) const {
     const int bw = box.x1 - box.x0;
-    f((box.y0 + k / bw) * width + box.x0 + k % bw);
+    return f((box.y0 + k / bw) * width + box.x0 + k % bw);
   }
 };
 }  // namespace detail

@@ -132,7 +132,8 @@ struct FrameResult {
   int detections_over_cap = 0;          ///< unmatched detections not considered: max_objects objects were live
   std::vector<int> created, deleted;    ///< object ids
   /// Lost objects (deleted as not visible) that a detection brought back,
-  /// with their ids; they were in an earlier frame's `deleted`.
+  /// or that the frame showed where they were lost (refind_in_view), with
+  /// their ids; they were in an earlier frame's `deleted`.
   std::vector<int> reidentified;
   /// Live objects that tracking had left behind, moved onto a detection
   /// before detection handling (relocalize_below; docs/system.md).

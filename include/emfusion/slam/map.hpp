@@ -73,6 +73,16 @@ struct Map {
       if (r.id == id) return r;
     throw std::logic_error("Map: no record for object " + std::to_string(id));
   }
+  /// Moves lost object k back among the live objects (its record no longer
+  /// deleted) and returns it, now the last of `objects`.
+  Object& bring_back(std::size_t k) {
+    objects.push_back(std::move(lost.at(k).object));
+    lost.erase(lost.begin() + std::ptrdiff_t(k));
+    ObjectRecord& rec = record_of(objects.back()->id());
+    rec.deleted = false;
+    rec.reason = DeletionReason::none;
+    return *objects.back();
+  }
 
   /// Bytes of the models on the backend: the background and every live and
   /// lost object's volume and foreground counts (docs/system.md, "Memory bound").

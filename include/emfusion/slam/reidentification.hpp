@@ -106,17 +106,6 @@ struct CountInView {
     return {0, gap > S(0) ? 1 : 0};
   }
 };
-/// CountInView over the pixels of `box` (k: the k-th pixel of the box, row
-/// by row).
-template <class S>
-struct CountInBox {
-  CountInView<S> count;
-  PixelBox box;
-  EMF_HD InViewPixels operator()(int k) const {
-    const int w = box.x1 - box.x0;
-    return count((box.y0 + k / w) * count.segmentation.width + box.x0 + k % w);
-  }
-};
 
 }  // namespace detail::reidentification
 
@@ -295,15 +284,10 @@ std::optional<NewObjectWeights<S, B>> reidentify(Map<S, B>& map, const Frame<S, 
       !detail::reidentification::consistent_with_frame(*map.lost[std::size_t(best)].object, best_T, frame,
                                                        target->mask, camera))
     return std::nullopt;
-  std::unique_ptr<ObjectModel<S, B>> obj = std::move(map.lost[std::size_t(best)].object);
-  map.lost.erase(map.lost.begin() + best);
-  obj->set_pose(map.T_world_camera * best_T.inverse() * obj->T_object_volume().inverse());
-  obj->add_class_score(inst.class_name, inst.score);
-  obj->count_detected();
-  ObjectRecord& rec = map.record_of(obj->id());
-  rec.deleted = false;
-  rec.reason = DeletionReason::none;
-  map.objects.push_back(std::move(obj));
+  ObjectModel<S, B>& obj = map.bring_back(std::size_t(best));
+  obj.set_pose(map.T_world_camera * best_T.inverse() * obj.T_object_volume().inverse());
+  obj.add_class_score(inst.class_name, inst.score);
+  obj.count_detected();
   return first_view_weights(det, d, seg, outside, camera, frame.points.backend());
 }
 
@@ -421,24 +405,19 @@ int refind_in_view(Map<S, B>& map, const Frame<S, B>& frame, const PinholeCamera
     raycast(o.volume(), camera, o.volume().pose() * T_volume_camera, drawn, rp, &o.foreground());
     const detail::reidentification::InViewPixels n = transform_reduce_index(
         frame.points.backend(), box.area(),
-        detail::reidentification::CountInBox<S>{
+        detail::PixelsInBox<detail::reidentification::CountInView<S>>{
             {{std::as_const(drawn.hit).view(), std::as_const(drawn.depth).view(), frame.points.view()},
              frame.segmentation.view(),
              border,
              params.likelihood.sigma},
-            box},
+            box,
+            camera.width},
         detail::reidentification::InViewPixels{}, thrust::plus<detail::reidentification::InViewPixels>());
     if (n.agree < min_pixels || double(n.agree) < double(params.reidentify_min_inliers) * (n.agree + n.behind)) {
       ++k;
       continue;
     }
-    std::unique_ptr<ObjectModel<S, B>> obj = std::move(map.lost[k].object);
-    map.lost.erase(map.lost.begin() + std::ptrdiff_t(k));
-    ObjectRecord& rec = map.record_of(obj->id());
-    rec.deleted = false;
-    rec.reason = DeletionReason::none;
-    result.reidentified.push_back(obj->id());
-    map.objects.push_back(std::move(obj));
+    result.reidentified.push_back(map.bring_back(k).id());
     ++found;
   }
   return found;
