@@ -146,7 +146,8 @@ struct Run {
     // Every object that existed is reported; one whose solve was refused
     // (or that was not tracked) kept its pose, unless it was moved onto a
     // detection (relocalized: an object made from a random mask on the wall
-    // fits any other patch of wall; its pose is finite, checked above).
+    // fits any other patch of wall; its pose is finite, checked above) or
+    // moved on hidden behind a nearer surface (moved_on: finite too).
     REQUIRE(r.object_status.size() == objects_before.size());
     for (std::size_t k = 0; k < objects_before.size(); ++k) {
       const ObjectStatus& st = r.object_status[k];
@@ -155,6 +156,7 @@ struct Run {
         CHECK(st.step.translation <= double(params.max_object_motion.translation));
         continue;
       }
+      if (st.tracking == TrackingOutcome::moved_on) continue;
       if (std::find(r.relocalized.begin(), r.relocalized.end(), st.id) != r.relocalized.end()) continue;
       for (const auto& o : system.objects())
         if (o->id() == st.id) CHECK(same_pose(o->pose(), objects_before[k].second));
@@ -674,6 +676,7 @@ TEST_CASE("Hostile frames: what a solve's report and pose make of the camera", "
   empty.reason = StopReason::too_few_terms;
   CHECK(tracking_outcome(empty, 100, T, PoseStep{}, bound) == TrackingOutcome::too_few_terms);
   CHECK(std::string(to_string(TrackingOutcome::jump_rejected)) == "jump_rejected");
+  CHECK(std::string(to_string(TrackingOutcome::moved_on)) == "moved_on");
 }
 
 TEST_CASE("Hostile frames: the guards' parameters are validated", "[slam]") {
@@ -696,6 +699,12 @@ TEST_CASE("Hostile frames: the guards' parameters are validated", "[slam]") {
   CHECK(error([](SystemParams<float>& p) { p.max_object_motion.rotation_degrees = 0; }).find("motion bounds") !=
         std::string::npos);
   CHECK(error([](SystemParams<float>& p) { p.max_camera_motion.translation = NAN; }).find("motion bounds") !=
+        std::string::npos);
+  // How long a lost object is looked for where its motion took it.
+  CHECK(error([](SystemParams<float>& p) { p.refind_moving_seconds = 0; }).empty());  // off
+  CHECK(error([](SystemParams<float>& p) { p.refind_moving_seconds = -1; }).find("refind_moving_seconds") !=
+        std::string::npos);
+  CHECK(error([](SystemParams<float>& p) { p.refind_moving_seconds = INFINITY; }).find("refind_moving_seconds") !=
         std::string::npos);
   // The camera's own solve settings.
   CHECK(error([](SystemParams<float>& p) { p.camera_pixel_stride = 3; }).empty());

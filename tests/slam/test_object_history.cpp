@@ -44,6 +44,9 @@ TEST_CASE("Object histories: created, tracked, retried, lost, found again, given
   r = frame(1);
   r.object_status = {status(1, TrackingOutcome::tracked, 2, true), status(2, TrackingOutcome::jump_rejected, 2, false)};
   h.add(r, map);
+  r = frame(1);  // object 2 hidden: moved on, neither tracked nor refused
+  r.object_status = {status(2, TrackingOutcome::moved_on, 1, false)};
+  h.add(r, map);
   // Object 1 is deleted as not visible and kept as lost; 2 by the existence rule.
   r = frame(2);
   r.deleted = {1, 2};
@@ -69,6 +72,8 @@ TEST_CASE("Object histories: created, tracked, retried, lost, found again, given
   CHECK(a.retried == 1);
   CHECK(a.from_prediction == 1);
   CHECK(b.refused == 1);
+  CHECK(b.moved_on == 1);
+  CHECK(b.tracked == 0);
   CHECK(b.retried == 1);
   REQUIRE(a.events.size() == 5);
   CHECK(a.events[0].kind == ObjectEventKind::created);

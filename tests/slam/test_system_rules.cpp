@@ -7,8 +7,9 @@
 // detected again (with lost_object_frames = 0: gone for good; fitted first
 // from the pose they were lost in and only as far as they can have moved;
 // with refind_in_view found again without a detection where the frame shows
-// them where they were lost), and a new object at the border survives until
-// seen.
+// them where they were lost), a new object at the border survives until
+// seen, and an object that passes behind another moves on at its velocity
+// and is found where it comes out.
 // The two longest (resting, re-identification) run in float only
 // (SystemRuleConfigs, support/configs.hpp).
 #include <algorithm>
@@ -714,5 +715,73 @@ TEMPLATE_LIST_TEST_CASE("A lost object the frame shows where it was lost comes b
     CHECK(pan_back(BoxScene<S>(vec3(S(0.3), S(0), S(1.2)))) < 0);
     CHECK(sys.objects().empty());
     CHECK(sys.map().lost.size() == 1);
+  }
+}
+
+TEMPLATE_LIST_TEST_CASE("An object that passes behind another moves on at its velocity and is found coming out",
+                        "[slam]", emfusion::test::SystemRuleConfigs) {
+  using S = typename TestType::Scalar;
+  using B = typename TestType::Backend;
+  // A wall 2 m ahead, a panel 0.8 m ahead (background: never detected) and
+  // a box 1.2 m ahead moving 1.5 cm a frame to the right behind the panel,
+  // too little of it in view to be visible for about 20 frames; a static
+  // camera, a detection on the first frame only.
+  const PinholeCamera<S> camera{S(140), S(140), S(79.5), S(59.5), 160, 120};
+  const S speed = S(0.015), x0 = S(-0.45);
+  const auto box_at = [&](int frame) { return vec3(x0 + speed * S(frame), S(0), S(1.2)); };
+  const auto depth_at = [&](int frame, Image<int, Host>* labels) {
+    sim::Scene<S> scene;
+    scene.add(sim::make_plane(sim::look_at(vec3(S(0), S(0), S(2)), Vec3<S>::zero(), vec3(S(0), S(-1), S(0)))));
+    scene.add(sim::make_box(SE3<S>(so3_exp(vec3(S(0.2), S(0.4), S(0))), box_at(frame)), vec3(S(0.08), S(0.06), S(0.07))));
+    scene.add(sim::make_box(SE3<S>::translation(vec3(S(0), S(0), S(0.8))), vec3(S(0.12), S(0.3), S(0.02))));
+    Image<S, Host> d;
+    sim::render_depth(scene, camera, SE3<S>::identity(), d, labels);
+    return d.template to<B>();
+  };
+  struct Outcome {
+    int frames_lost = 0, created = 0;
+    bool back = false;    // object 1 is live at the end
+    double error = 1e9;   // its distance from where the box went, metres
+  };
+  const auto run = [&](const SystemParams<S>& params) {
+    System<S, B> sys(camera, params);
+    Image<int, Host> labels;
+    const Image<S, B> first = depth_at(0, &labels);
+    const Detections det = detections_of(labels, 1, "cup", 0.0);
+    sys.process(first, 0.0, &det);
+    REQUIRE(sys.objects().size() == 1);
+    const SE3<S> start = sys.objects()[0]->pose();
+    Outcome out;
+    const int last = 64;
+    for (int k = 1; k <= last; ++k) {
+      const FrameResult r = sys.process(depth_at(k, nullptr), k / 30.0);
+      out.created += int(r.created.size());
+      out.frames_lost += sys.objects().empty() ? 1 : 0;
+    }
+    out.back = sys.objects().size() == 1 && sys.objects()[0]->id() == 1;
+    if (out.back) {
+      // The box only translates: so does its object frame.
+      const Vec3<S> moved = sys.objects()[0]->pose().translation() - start.translation();
+      out.error = double(norm(moved - (box_at(last) - box_at(0))));
+    }
+    return out;
+  };
+  SystemParams<S> params = small_params<S>();
+  SECTION("held while hidden and looked for where it went: back within a second, where the box is") {
+    REQUIRE(params.hold_occluded_objects);
+    REQUIRE(params.refind_moving_seconds > S(0));
+    const Outcome out = run(params);
+    INFO("frames without the object: " << out.frames_lost << ", error " << out.error << " m");
+    CHECK(out.created == 0);
+    CHECK(out.back);
+    CHECK(out.error < 0.015);
+    CHECK(out.frames_lost < 30);
+  }
+  SECTION("without either: lost behind the panel and not found where it went") {
+    params.hold_occluded_objects = false;
+    params.refind_moving_seconds = S(0);
+    const Outcome out = run(params);
+    INFO("frames without the object: " << out.frames_lost << ", error " << out.error << " m");
+    CHECK_FALSE((out.back && out.error < 0.015));
   }
 }

@@ -244,4 +244,14 @@ class SE3 {
 using SE3f = SE3<float>;
 using SE3d = SE3<double>;
 
+/// True if every entry of T's 3x4 matrix is finite.
+template <class S>
+bool is_finite(const SE3<S>& T) {
+  const auto m = T.matrix();
+  for (int r = 0; r < 3; ++r)
+    for (int c = 0; c < 4; ++c)
+      if (!std::isfinite(double(m(r, c)))) return false;
+  return true;
+}
+
 }  // namespace emfusion

@@ -15,7 +15,7 @@
 namespace emfusion {
 
 /// One entry of run.json's "objects": {"id", "class", "tracked_frames",
-/// "refused_frames", "retried_frames", "from_prediction_frames", "events"},
+/// "refused_frames", "moved_on_frames", "retried_frames", "from_prediction_frames", "events"},
 /// each event {"event", "frame", "timestamp"} plus "rule" (the deletion
 /// rule) for `lost` and `deleted`, "into" (the id it goes on as) for
 /// `merged` and "from" (the id it took over) for `absorbed`. A timestamp that is not finite is
@@ -26,6 +26,7 @@ inline Json object_history_json(const ObjectHistory& history, const std::string&
   object["class"] = class_name;
   object["tracked_frames"] = history.tracked;
   object["refused_frames"] = history.refused;
+  object["moved_on_frames"] = history.moved_on;
   object["retried_frames"] = history.retried;
   object["from_prediction_frames"] = history.from_prediction;
   Json& events = object["events"] = Json::array();

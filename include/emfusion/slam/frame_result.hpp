@@ -37,7 +37,7 @@ inline const char* to_string(DeletionReason r) {
 
 /// What tracking did with a pose in one frame: the camera's
 /// (FrameResult::camera_tracking) or an object's (ObjectStatus::tracking).
-/// Every outcome but `tracked` leaves the previous pose in place.
+/// Every outcome but `tracked` and `moved_on` leaves the previous pose in place.
 enum class TrackingOutcome {
   /// No solve (or its pose not taken): a frame before or starting the map,
   /// an object created this frame, the objects of a frame whose camera was
@@ -47,6 +47,9 @@ enum class TrackingOutcome {
   too_few_terms,  ///< too few measurements met the model (no valid depth, out of view, outside the volume)
   solve_failed,   ///< no solution: non-finite or singular normal equations, or a non-finite pose
   jump_rejected,  ///< moved further than the per-frame bound (max_camera_motion, max_object_motion)
+  /// An object not solved: hidden behind a nearer surface, it moved on at
+  /// its velocity (hold_occluded_objects; where it has none it stayed).
+  moved_on,
 };
 
 inline const char* to_string(TrackingOutcome t) {
@@ -56,6 +59,7 @@ inline const char* to_string(TrackingOutcome t) {
     case TrackingOutcome::too_few_terms: return "too_few_terms";
     case TrackingOutcome::solve_failed: return "solve_failed";
     case TrackingOutcome::jump_rejected: return "jump_rejected";
+    case TrackingOutcome::moved_on: return "moved_on";
   }
   return "unknown";
 }

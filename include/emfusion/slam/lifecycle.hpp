@@ -9,13 +9,18 @@
 // second is drawn where the camera no longer sees it, as after a fast move
 // its tracking could not follow. Objects created or re-identified on a
 // detector frame are spared the visibility rule until first seen, and not
-// tracked meanwhile while the image border cuts them (hold_unseen_objects,
-// which System runs right after tracking the objects).
+// tracked meanwhile while the image border cuts them; objects hidden behind
+// a nearer surface move on at their velocity instead of being tracked
+// (both hold_unseen_objects, which System runs right after tracking the
+// objects).
 #pragma once
 
 #include <algorithm>
+#include <cmath>
 #include <cstddef>
+#include <cstdint>
 #include <memory>
+#include <optional>
 #include <utility>
 #include <vector>
 
@@ -27,6 +32,7 @@
 #include "emfusion/slam/frame.hpp"
 #include "emfusion/slam/frame_result.hpp"
 #include "emfusion/slam/map.hpp"
+#include "emfusion/slam/motion_prediction.hpp"
 #include "emfusion/slam/params.hpp"
 
 namespace emfusion {
@@ -99,11 +105,62 @@ struct AddObjectPixel {
   }
 };
 
+
+/// Of the pixels inside the border that a model's rendering draws, those
+/// whose measured surface agrees with the model's and those where the frame
+/// shows a surface in front of it.
+struct DrawnCover {
+  int drawn = 0, agree = 0, front = 0;
+};
+
+/// An object's last rendering, as the hidden rule reads it (empty: none).
+template <class S>
+struct DrawnModel {
+  ImageView<const std::uint8_t> hit;
+  ImageView<const S> depth;
+};
+
+/// DrawnCover as three doubles, the form grouped_accumulate sums.
+struct CoverSums {
+  static constexpr int components = 3;
+  double v[components] = {0, 0, 0};
+  EMF_HD double& component(int c) { return v[c]; }
+  EMF_HD double component(int c) const { return v[c]; }
+  EMF_HD CoverSums& operator+=(const CoverSums& o) {
+    for (int c = 0; c < components; ++c) v[c] += o.v[c];
+    return *this;
+  }
+  DrawnCover counts() const { return {int(v[0]), int(v[1]), int(v[2])}; }
+};
+
+/// Pixel i's part of object g's DrawnCover: drawn inside the border, the
+/// frame's surface within `tolerance` of the model's, or nearer by more
+/// than twice that.
+template <class S>
+struct AddCoverPixel {
+  ImageView<const Vec3<S>> points;
+  int border;
+  S tolerance;
+  EMF_HD void operator()(int, const DrawnModel<S>& m, int i, CoverSums& acc) const {
+    if (m.hit.empty()) return;
+    const int u = i % points.width, v = i / points.width;
+    if (!m.hit[i] || u < border || v < border || u >= points.width - border || v >= points.height - border) return;
+    const S gap = points[i].z() - m.depth[i];  // NaN where nothing was measured
+    acc.v[0] += 1.0;
+    if (std::fabs(gap) <= tolerance) acc.v[1] += 1.0;
+    if (gap < -S(2) * tolerance) acc.v[2] += 1.0;
+  }
+};
+
 }  // namespace detail::lifecycle
 
 /// What counting every object's pixels keeps between frames.
 template <class S, Backend B>
 using ObjectPixelsWorkspace = PerGroupWorkspace<ImageView<const S>, detail::lifecycle::PixelSums, B>;
+
+/// What counting how the frame covers every object's model keeps between frames.
+template <class S, Backend B>
+using DrawnCoverWorkspace = PerGroupWorkspace<detail::lifecycle::DrawnModel<S>, detail::lifecycle::CoverSums, B>;
 
 /// Hands free heap memory back to the system. glibc keeps freed blocks
 /// below its dynamic mmap threshold (which rises to the size of the largest
@@ -145,40 +202,103 @@ std::vector<ObjectPixels> all_object_pixels(const Frame<S, B>& frame, int count,
   return out;
 }
 
-/// The grace's other half (SystemParams::hold_unseen_objects): after
-/// track_objects, the young objects (Map::young) that this frame's E-step
-/// shows cut by the image border or gone from it (fewer than
-/// keep_mask_pixels of their association above 1/2 inside the visibility
-/// border, and less there than in the border band, or fewer in all than
-/// min_object_terms) go back to the pose they had before the frame
-/// (`before`), their outcome not_tracked. A small object wholly in view is
-/// tracked as ever. The association is the frame's own, from before the
-/// objects' solves; the segmentation is the last frame's, whose labels may
-/// no longer be the objects' order, so it is not used. One pass over the
-/// frame on frames with young objects, none on the others. Returns how
-/// many were held.
+/// Objects the frame does not show well enough to track, after
+/// track_objects; each goes to a pose of its own, its outcome not_tracked
+/// (young) or moved_on (hidden).
+/// - The grace's other half (SystemParams::hold_unseen_objects): a young
+///   object (Map::young) that this frame's E-step (from before the objects'
+///   solves) shows cut by the image border or gone from it (fewer than
+///   keep_mask_pixels of its association above 1/2 inside the visibility
+///   border, and less there than in the border band, or fewer than
+///   min_object_terms in all) goes back to the pose it had before the frame
+///   (`before`). A small object wholly in view is tracked as ever.
+/// - Hidden (SystemParams::hold_occluded_objects): any other object whose
+///   model, as drawn at its last pose (its rendering of the last frame),
+///   covers at least keep_mask_pixels inside the border and is more often
+///   behind a surface of the frame nearer by twice likelihood.sigma than
+///   within likelihood.sigma of it moves on at its mean velocity of the last
+///   0.2 s (carry_on; stays at `before` without one): something passes in
+///   front of it, and the part left of it would pull it along with the
+///   surface in front (docs/system.md, "Held while hidden").
+/// The segmentation is the last frame's, whose labels may no longer be the
+/// objects' order, so it is not used. With the hidden rule one pass over
+/// the frame for every object's cover; one more for the E-step counts on
+/// frames with young objects or an object the cover finds behind others.
+/// Returns how many were held.
 template <class S, Backend B>
 int hold_unseen_objects(Map<S, B>& map, const Frame<S, B>& frame, const SystemParams<S>& params,
-                        const std::vector<SE3<S>>& before, std::vector<PoseTrack>& tracks,
-                        ObjectPixelsWorkspace<S, B>* workspace = nullptr) {
+                        const std::vector<SE3<S>>& before, std::vector<PoseTrack>& tracks, double timestamp,
+                        ObjectPixelsWorkspace<S, B>* workspace = nullptr,
+                        DrawnCoverWorkspace<S, B>* cover_workspace = nullptr) {
   const int n = int(map.objects.size());
   detail::require(int(before.size()) == n && int(tracks.size()) == n, "hold_unseen_objects",
                   "need one pose and one track per live object");
-  bool any = false;
-  for (const auto& o : map.objects) any = any || map.is_young(o->id());
-  if (!params.hold_unseen_objects || !any) return 0;
-  ObjectPixelsWorkspace<S, B> local;
-  const std::vector<ObjectPixels> pixels = all_object_pixels(
-      frame, n, params.visibility_border_for(frame.segmentation.width()), workspace ? *workspace : local);
+  bool any_young = false;
+  for (const auto& o : map.objects) any_young = any_young || map.is_young(o->id());
+  const bool young_rule = params.hold_unseen_objects && any_young;
+  if (!young_rule && !params.hold_occluded_objects) return 0;
+  const int border = params.visibility_border_for(frame.segmentation.width());
   const int min_pixels = params.keep_mask_pixels_for(frame.segmentation.width(), frame.segmentation.height());
+  // The hidden rule: more of its model is behind a nearer surface than
+  // shows, and the E-step does not give it twice as many pixels as show
+  // (then the frame shows it beside where it is drawn: it is displaced,
+  // not hidden, and tracking it brings it back). Every object's cover in
+  // one pass; the E-step counts in another only where a rule needs them.
+  std::vector<detail::lifecycle::DrawnModel<S>> models(static_cast<std::size_t>(n));
+  for (int k = 0; k < n && params.hold_occluded_objects; ++k) {
+    const ObjectModel<S, B>& o = *map.objects[std::size_t(k)];
+    const RaycastResult<S, B>& r = o.rendering();
+    if (!map.is_young(o.id()) && r.hit.same_size(frame.points.width(), frame.points.height()))
+      models[std::size_t(k)] = {std::as_const(r.hit).view(), std::as_const(r.depth).view()};
+  }
+  DrawnCoverWorkspace<S, B> local_cover;
+  const std::vector<detail::lifecycle::CoverSums> covers =
+      params.hold_occluded_objects
+          ? reduce_per_group(frame.points.backend(), models, frame.points.size(),
+                             detail::lifecycle::AddCoverPixel<S>{frame.points.view(), border, params.likelihood.sigma},
+                             detail::lifecycle::CoverSums{}, cover_workspace ? *cover_workspace : local_cover)
+          : std::vector<detail::lifecycle::CoverSums>{};
+  const auto covered = [&](int k) {
+    const detail::lifecycle::DrawnCover c = covers[std::size_t(k)].counts();
+    return c.drawn >= min_pixels && c.front > c.agree;
+  };
+  bool any_covered = false;
+  for (int k = 0; k < n && params.hold_occluded_objects; ++k) any_covered = any_covered || covered(k);
+  ObjectPixelsWorkspace<S, B> local;
+  const std::vector<ObjectPixels> pixels = young_rule || any_covered
+                                               ? all_object_pixels(frame, n, border, workspace ? *workspace : local)
+                                               : std::vector<ObjectPixels>{};
+  const auto hidden = [&](int k) {
+    return covered(k) && pixels[std::size_t(k)].associated_inner <= 2 * covers[std::size_t(k)].counts().agree;
+  };
+  // The young rule: cut by the border or gone.
+  const auto unseen = [&](int k) {
+    const ObjectPixels& px = pixels[std::size_t(k)];
+    const bool cut = 2 * px.associated_inner < px.associated, gone = px.associated < params.min_object_terms;
+    return px.associated_inner < min_pixels && (cut || gone);
+  };
+  const Trajectory& camera = map.camera_trajectory;
   int held = 0;
   for (int k = 0; k < n; ++k) {
     ObjectModel<S, B>& o = *map.objects[std::size_t(k)];
-    const ObjectPixels& px = pixels[std::size_t(k)];
-    const bool cut = 2 * px.associated_inner < px.associated, gone = px.associated < params.min_object_terms;
-    if (!map.is_young(o.id()) || px.associated_inner >= min_pixels || !(cut || gone)) continue;
-    o.restore_pose(before[std::size_t(k)]);
-    tracks[std::size_t(k)].outcome = TrackingOutcome::not_tracked;
+    const bool young = map.is_young(o.id());
+    std::optional<SE3<S>> pose;
+    TrackingOutcome outcome = TrackingOutcome::not_tracked;
+    if (young && young_rule && unseen(k)) {
+      pose = before[std::size_t(k)];
+    } else if (!young && params.hold_occluded_objects && hidden(k)) {
+      pose = before[std::size_t(k)];
+      outcome = TrackingOutcome::moved_on;
+      // From its pose of the last frame (a frame or two dropped between:
+      // still within a second).
+      if (!camera.empty())
+        if (const std::optional<SE3<double>> p =
+                carry_on(map.record_of(o.id()).trajectory, camera.back().timestamp, timestamp, 1.0))
+          if (is_finite(p->template cast<S>())) pose = p->template cast<S>();
+    }
+    if (!pose) continue;
+    o.restore_pose(*pose);
+    tracks[std::size_t(k)].outcome = outcome;
     ++held;
   }
   return held;

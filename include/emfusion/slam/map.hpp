@@ -11,6 +11,7 @@
 #include <memory>
 #include <stdexcept>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "emfusion/core/backend.hpp"
@@ -68,8 +69,9 @@ struct Map {
   int frames = 0;        ///< frames processed
   bool started = false;  ///< a frame has been mapped (the first camera defines the world)
 
-  ObjectRecord& record_of(int id) {
-    for (ObjectRecord& r : records)
+  ObjectRecord& record_of(int id) { return const_cast<ObjectRecord&>(std::as_const(*this).record_of(id)); }
+  const ObjectRecord& record_of(int id) const {
+    for (const ObjectRecord& r : records)
       if (r.id == id) return r;
     throw std::logic_error("Map: no record for object " + std::to_string(id));
   }

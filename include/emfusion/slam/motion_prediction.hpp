@@ -2,7 +2,9 @@
 // between the last two poses of a trajectory repeated over the time to the
 // new frame. Tracking starts its solve there when the frame agrees with the
 // prediction at least as well as with the last pose (slam/tracking.hpp),
-// and the E-step associates the frame at the predicted poses.
+// and the E-step associates the frame at the predicted poses. Over longer
+// gaps (an object hidden or lost for up to a second) carry_on goes on in a
+// straight line at the mean velocity of the last poses.
 #pragma once
 
 #include <algorithm>
@@ -39,6 +41,27 @@ inline std::optional<SE3<double>> predict_pose(const Trajectory& trajectory, dou
   const std::size_t n = trajectory.size();
   if (n < 2 || trajectory[n - 2].timestamp != previous || trajectory[n - 1].timestamp != last) return std::nullopt;
   return constant_velocity(trajectory[n - 2], trajectory[n - 1], timestamp);
+}
+
+/// Where an object last estimated at `last` (the time of its trajectory's
+/// last pose, else nothing) is at `timestamp`, up to `max_seconds` later
+/// (else nothing), if it goes on at the mean velocity of its poses over the
+/// `window` seconds up to `last` (at least two poses): in a straight line,
+/// turning about its origin at their mean rate, the two apart so that a
+/// small turn does not bend its path over many frames.
+inline std::optional<SE3<double>> carry_on(const Trajectory& trajectory, double last, double timestamp,
+                                           double max_seconds, double window = 0.2) {
+  const std::size_t n = trajectory.size();
+  const double ahead = timestamp - last;
+  if (n < 2 || trajectory[n - 1].timestamp != last || !(ahead > 0) || !(ahead <= max_seconds)) return std::nullopt;
+  std::size_t first = n - 2;
+  while (first > 0 && trajectory[first - 1].timestamp >= last - window) --first;
+  const TimedPose &a = trajectory[first], &b = trajectory[n - 1];
+  const double span = b.timestamp - a.timestamp;
+  if (!(span > 0) || !std::isfinite(span)) return std::nullopt;
+  const double s = ahead / span;
+  const Mat3<double> R = b.pose.rotation() * so3_exp(so3_log(a.pose.rotation().transpose() * b.pose.rotation()) * s);
+  return SE3<double>(R, b.pose.translation() + (b.pose.translation() - a.pose.translation()) * s);
 }
 
 }  // namespace emfusion

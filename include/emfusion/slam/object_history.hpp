@@ -50,6 +50,7 @@ struct ObjectHistory {
   std::vector<ObjectEvent> events;  ///< in frame order
   int tracked = 0;                  ///< frames its solve was accepted
   int refused = 0;                  ///< frames its solve ran and was refused (the pose stayed)
+  int moved_on = 0;                 ///< frames it was hidden behind a nearer surface and moved on, not solved
   int retried = 0;                  ///< frames a first solve was refused and run again from the other start
   int from_prediction = 0;          ///< frames the solve taken started at the motion prediction
 };
@@ -67,6 +68,7 @@ class ObjectHistories {
     for (const ObjectStatus& s : r.object_status) {
       ObjectHistory& h = history(s.id);
       if (s.tracking == TrackingOutcome::tracked) ++h.tracked;
+      else if (s.tracking == TrackingOutcome::moved_on) ++h.moved_on;
       else if (s.tracking != TrackingOutcome::not_tracked) ++h.refused;
       h.retried += s.attempts > 1;
       h.from_prediction += s.tracking == TrackingOutcome::tracked && s.from_prediction;

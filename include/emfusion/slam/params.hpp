@@ -178,12 +178,22 @@ struct SystemParams {
   /// tracked: it keeps the pose it was found at instead of following the
   /// few pixels left of it at the border.
   bool hold_unseen_objects = true;
+  /// An object whose model, drawn at its last pose, covers at least
+  /// keep_mask_pixels and is more often behind a nearer surface of the frame
+  /// than shown by it is not tracked: it moves on at its velocity instead
+  /// of following the part left of it (hold_unseen_objects, lifecycle.hpp).
+  bool hold_occluded_objects = true;
   /// Lost objects come back without a detection when the frame shows their
   /// model where they were lost (refind_in_view, reidentification.hpp):
   /// an object that left the view, or stood hidden behind another, while
   /// it did not move, is tracked again from the frame it is back instead
   /// of from the next detector frame.
   bool refind_in_view = true;
+  /// ... and a lost object that was moving is looked for where its motion
+  /// would have carried it, for up to this long after it was lost (seconds;
+  /// 0: only where it was lost): one that passed behind another object
+  /// comes out on the other side.
+  S refind_moving_seconds = S(1);
 
   // Rendering (sec. 3.5).
   S min_foreground = S(0.5);     ///< object voxels render where p_fg exceeds this
@@ -265,6 +275,8 @@ struct SystemParams {
     detail::require(reidentify_min_inliers > 0 && reidentify_min_inliers <= 1, w,
                     "reidentify_min_inliers must be in (0, 1]");
     detail::require(relocalize_below >= 0 && relocalize_below <= 1, w, "relocalize_below must be in [0, 1]");
+    detail::require(refind_moving_seconds >= 0 && std::isfinite(double(refind_moving_seconds)), w,
+                    "refind_moving_seconds must be finite and not negative");
     detail::require(reidentify_keep_margin >= 0 && reidentify_keep_margin <= 1, w,
                     "reidentify_keep_margin must be in [0, 1]");
     detail::require(merge_min_inliers >= 0 && merge_min_inliers <= 1, w, "merge_min_inliers must be in [0, 1]");

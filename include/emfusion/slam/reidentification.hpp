@@ -365,43 +365,55 @@ std::vector<int> relocalize_objects(Map<S, B>& map, const Frame<S, B>& frame, co
   return moved;
 }
 
+/// Where lost object `lost` may be now, besides where it was lost: if its
+/// trajectory ends at the frame it was lost in and `timestamp` is at most
+/// refind_moving_seconds after that, where its mean motion over its last
+/// 0.2 s carried it (carry_on); else nothing.
+template <class S, Backend B>
+std::optional<SE3<S>> carried_on_pose(const Map<S, B>& map, const LostObject<S, B>& lost, double timestamp,
+                                      const SystemParams<S>& params) {
+  const Trajectory& camera = map.camera_trajectory;
+  const std::size_t at = std::size_t(lost.lost_at);
+  if (!(params.refind_moving_seconds > 0) || at >= camera.size()) return std::nullopt;
+  const std::optional<SE3<double>> p = carry_on(map.record_of(lost.object->id()).trajectory, camera[at].timestamp,
+                                                timestamp, double(params.refind_moving_seconds));
+  if (!p || !is_finite(p->template cast<S>())) return std::nullopt;
+  return p->template cast<S>();
+}
+
 /// Lost objects found again without a detection (params.refind_in_view;
 /// docs/system.md, "Lost objects"), at the end of a frame: each lost object
-/// (not lost this frame) whose volume projects to at least keep_mask_pixels
-/// pixels is drawn at the pose it was lost at (surfaces of
-/// p_fg above 1/2, depth only) and comes back to the map, tracked from the
-/// next frame, where at least keep_mask_pixels of the pixels inside the
-/// visibility border that it draws and no live object claims show the
-/// measured surface within likelihood.sigma of its own, and those are at least
+/// (not lost this frame) is drawn where its motion would have carried it
+/// (carried_on_pose: lost while moving, up to refind_moving_seconds ago),
+/// else at the pose it was lost at, wherever its volume projects to at
+/// least keep_mask_pixels pixels (surfaces of p_fg above 1/2, depth only).
+/// It comes back to the map at that pose, tracked from the next frame,
+/// where at least keep_mask_pixels of the pixels inside the visibility
+/// border that it draws and no live object claims show the measured
+/// surface within likelihood.sigma of its own, and those are at least
 /// reidentify_min_inliers of the ones that do or show a surface behind it.
-/// An object that moved while it was out of view is drawn where the frame
-/// now sees what was behind it, and stays lost until a detection finds it.
-/// The ids found are added to result.reidentified; returns how many.
+/// An object that moved while it was out of view in any other way is drawn
+/// where the frame now sees what was behind it, and stays lost until a
+/// detection finds it. The ids found are added to result.reidentified;
+/// returns how many.
 template <class S, Backend B>
 int refind_in_view(Map<S, B>& map, const Frame<S, B>& frame, const PinholeCamera<S>& camera,
                    const SystemParams<S>& params, FrameResult& result) {
-  if (!params.refind_in_view || map.lost.empty()) return 0;
+  if (!params.refind_in_view || map.lost.empty() || map.camera_trajectory.empty()) return 0;
   const int min_pixels = params.keep_mask_pixels_for(camera.width, camera.height);
   const int border = params.visibility_border_for(camera.width);
+  const double now = map.camera_trajectory.back().timestamp;
   RaycastResult<S, B> drawn;
   RaycastParams<S> rp;
   rp.surface = false;
-  int found = 0;
-  for (std::size_t k = 0; k < map.lost.size() && int(map.objects.size()) < params.max_objects;) {
-    const ObjectModel<S, B>& o = *map.lost[k].object;
-    if (map.lost[k].lost_at >= map.frames || params.ignores(o.class_name())) {
-      ++k;
-      continue;
-    }
+  // True where the frame shows o's model at its present pose.
+  const auto shown = [&](const ObjectModel<S, B>& o) {
     const SE3<S> T_volume_camera = (o.pose() * o.T_object_volume()).inverse() * map.T_world_camera;
     // Only the pixels its volume projects to can show it: none when it is
     // out of view (no cast, no count).
     const PixelBox box =
         projected_box(camera, T_volume_camera.inverse(), Vec3<S>::zero(), o.volume().view().extent());
-    if (box.area() < min_pixels) {
-      ++k;
-      continue;
-    }
+    if (box.area() < min_pixels) return false;
     raycast(o.volume(), camera, o.volume().pose() * T_volume_camera, drawn, rp, &o.foreground());
     const detail::reidentification::InViewPixels n = transform_reduce_index(
         frame.points.backend(), box.area(),
@@ -413,7 +425,23 @@ int refind_in_view(Map<S, B>& map, const Frame<S, B>& frame, const PinholeCamera
             box,
             camera.width},
         detail::reidentification::InViewPixels{}, thrust::plus<detail::reidentification::InViewPixels>());
-    if (n.agree < min_pixels || double(n.agree) < double(params.reidentify_min_inliers) * (n.agree + n.behind)) {
+    return n.agree >= min_pixels && double(n.agree) >= double(params.reidentify_min_inliers) * (n.agree + n.behind);
+  };
+  int found = 0;
+  for (std::size_t k = 0; k < map.lost.size() && int(map.objects.size()) < params.max_objects;) {
+    ObjectModel<S, B>& o = *map.lost[k].object;
+    if (map.lost[k].lost_at >= map.frames || params.ignores(o.class_name())) {
+      ++k;
+      continue;
+    }
+    const SE3<S> lost_pose = o.pose();
+    bool back = false;
+    if (const std::optional<SE3<S>> carried = carried_on_pose(map, map.lost[k], now, params)) {
+      o.restore_pose(*carried);
+      back = shown(o);
+      if (!back) o.restore_pose(lost_pose);
+    }
+    if (!back && !shown(o)) {
       ++k;
       continue;
     }

@@ -245,7 +245,8 @@ class System {
                                            &tracking_workspace_, &object_starts);
       std::vector<SE3<S>> before;
       for (const PoseStarts<S>& s : object_starts) before.push_back(s.previous);
-      hold_unseen_objects(map_, frame_, params_, before, frame_.object_tracks, &object_pixels_workspace_);
+      hold_unseen_objects(map_, frame_, params_, before, frame_.object_tracks, timestamp, &object_pixels_workspace_,
+                          &drawn_cover_workspace_);
       for (const PoseTrack& t : frame_.object_tracks) result.objects.push_back(t.report);
       clock_.lap(result.times.track_objects);
     }
@@ -273,6 +274,7 @@ class System {
   IntegrationWorkspace<S, B> integration_workspace_;
   ObjectIntegrationWorkspace<S, B> object_integration_workspace_;
   ObjectPixelsWorkspace<S, B> object_pixels_workspace_;
+  DrawnCoverWorkspace<S, B> drawn_cover_workspace_;
   SparseIntegrationWorkspace<S, B> sparse_workspace_;
   /// The stage times of the frame being processed: on CUDA events queued at
   /// each stage's end and read once at its finish, so the device is not

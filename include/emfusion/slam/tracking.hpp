@@ -62,14 +62,6 @@ PoseStep step_between(const SE3<S>& from, const SE3<S>& to) {
   return {double(norm(d.translation())), double(norm(so3_log(d.rotation())))};
 }
 
-template <class S>
-bool is_finite(const SE3<S>& T) {
-  const auto m = T.matrix();
-  for (int r = 0; r < 3; ++r)
-    for (int c = 0; c < 4; ++c)
-      if (!std::isfinite(double(m(r, c)))) return false;
-  return true;
-}
 
 /// The outcome of a solve that proposed `T_new`: accepted only if it found a
 /// solution with at least `min_terms` terms that moves less than `bound`.
