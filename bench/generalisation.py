@@ -22,6 +22,8 @@ Steps (subcommands):
   errors    per estimate, its position and rotation error against its mover, frame by frame
             (every --every-th frame and those over --above metres): where tracking went wrong
   selftest  check the metric code on small hand-made cases
+  compare   two files written by report --json: failed targets of each and every number that
+            differs (an A/B of two settings run with --tag, say)
 
 Examples:
   /usr/bin/python3 bench/generalisation.py all --backend cuda --jobs 2
@@ -816,6 +818,74 @@ def errors(args, seqs):
 
 # ----------------------------------------------------------------------------- self-test
 
+def failed_targets(results):
+    """(failed, scored): the object targets of a `report --json` result that
+    failed and all that were scored (movers never visible score none)."""
+    failed = scored = 0
+    for res in results.values():
+        for o in res.get('objects') or []:
+            for v in (o.get('pass') or {}).values():
+                scored += v is not None
+                failed += v is False
+    return failed, scored
+
+
+def flatten_results(results):
+    """Every number of a `report --json` result by a readable key: 'seq camera_ate',
+    'seq object ate', ...; run times ('seconds') left out."""
+    out = {}
+
+    def walk(x, key):
+        if isinstance(x, dict):
+            for k, v in x.items():
+                if k != 'seconds':
+                    walk(v, key + (str(k),))
+        elif isinstance(x, list):
+            named = all(isinstance(v, dict) and 'name' in v for v in x)
+            for i, v in enumerate(x):
+                walk(v, key[:-1] + (v['name'],) if named else key + (str(i),))
+        else:
+            out[' '.join(key)] = x
+    for seq, res in results.items():
+        walk(res, (seq,))
+    return out
+
+
+def differences(a, b):
+    """(key, value in a, value in b) for every number that differs between two
+    `report --json` results, in key order; missing on one side is None."""
+    fa, fb = flatten_results(a), flatten_results(b)
+    return [(k, fa.get(k), fb.get(k)) for k in sorted(set(fa) | set(fb)) if fa.get(k) != fb.get(k)]
+
+
+def compare(paths):
+    """Prints the failed targets of two `report --json` files and every number that differs."""
+    if len(paths) != 2:
+        raise SystemExit('compare takes two files written by report --json (got %d)' % len(paths))
+    results = []
+    for p in paths:
+        try:
+            with open(p) as f:
+                results.append(json.load(f))
+        except (OSError, ValueError) as e:
+            raise SystemExit('compare: cannot read %s: %s' % (p, e))
+        if not isinstance(results[-1], dict):
+            raise SystemExit('compare: %s is not a report --json file (no sequences)' % p)
+    for p, r in zip(paths, results):
+        print('%s: %d of %d object targets failed, %d sequences' % (p, *failed_targets(r), len(r)))
+    diff = differences(*results)
+    small = 0
+    for k, x, y in diff:
+        cm = k.endswith('ate') and all(isinstance(v, (int, float)) for v in (x, y))
+        x, y = ('%.2f cm' % (100 * x), '%.2f cm' % (100 * y)) if cm else (x, y)
+        if cm and x == y:
+            small += 1  # an ATE that moved by less than the printed 0.01 cm
+            continue
+        print('  %-60s %s -> %s' % (k, x, y))
+    print('%d numbers differ (%d of them ATEs by less than 0.01 cm, not listed)' % (len(diff), small))
+    return 0
+
+
 def selftest():
     """Checks of the metric code on small constructed cases."""
     import numpy as np
@@ -936,6 +1006,14 @@ def selftest():
             json.dump({'objects': [{'id': 1, 'events': [{'event': 'absorbed', 'from': 4}]},
                                    {'id': 4, 'events': [{'event': 'created'}, {'event': 'merged', 'into': 1}]}]}, f)
         assert merged_ids(p) == {4}
+    # compare: targets counted per object; objects keyed by name, run times left out
+    ra = {'s1': {'camera_ate': 0.001, 'seconds': 5.0, 'objects': [
+        {'name': 'cup_1', 'ate': 0.002, 'pass': {'lost': True, 'obj_ate': True, 'coverage': None}}]}}
+    rb = {'s1': {'camera_ate': 0.001, 'seconds': 9.0, 'objects': [
+        {'name': 'cup_1', 'ate': 0.03, 'pass': {'lost': True, 'obj_ate': False, 'coverage': None}}]}}
+    assert failed_targets(ra) == (0, 2) and failed_targets(rb) == (1, 2)
+    assert differences(ra, rb) == [('s1 cup_1 ate', 0.002, 0.03),
+                                   ('s1 cup_1 pass obj_ate', True, False)], differences(ra, rb)
     print('selftest: all checks passed')
     return 0
 
@@ -947,7 +1025,9 @@ def main():
         write_labels_summary(sys.argv[2])
         return 0
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument('step', choices=['list', 'generate', 'export', 'run', 'report', 'all', 'errors', 'selftest'])
+    ap.add_argument('step', choices=['list', 'generate', 'export', 'run', 'report', 'all', 'errors', 'selftest',
+                                     'compare'])
+    ap.add_argument('files', nargs='*', help='compare: two files written by report --json')
     ap.add_argument('--work', default=os.path.join(HERE, 'out'),
                     help='folder for sequences and runs (default bench/out, git-ignored)')
     ap.add_argument('--app', default=os.path.join(REPO, 'build', 'examples', 'emfusion'),
@@ -976,6 +1056,8 @@ def main():
 
     if args.step == 'selftest':
         return selftest()
+    if args.step == 'compare':
+        return compare(args.files)
     seqs = QUICK if args.quick else SEQUENCES
     if args.only:
         want = args.only.split(',')
