@@ -97,6 +97,8 @@ if [[ "$purpose" == test ]]; then
   need "Catch2 headers (v2 or v3)" catch2 bash -c 'printf "#include <catch2/catch.hpp>\n" | g++ -x c++ -E - -o /dev/null 2>/dev/null ||
                                                   printf "#include <catch2/catch_all.hpp>\n" | g++ -std=c++17 -x c++ -E - -o /dev/null 2>/dev/null'
   need "Python 3 (app tests read run.json with it)" python3 have_command python3
+  need "numpy for Debian's python3 (the generalisation benchmark's selftest)" python3-numpy \
+    bash -c '/usr/bin/python3 -c "import numpy" 2>/dev/null || python3 -c "import numpy" 2>/dev/null'
   need "Chromium (the report test)" chromium have_command chromium
   need "clang (the fuzz build)" clang have_command clang
   need "LLVM's OpenMP (the fuzz build)" libomp-dev bash -c 'compgen -G "/usr/lib/llvm-*/include/omp.h" >/dev/null || compgen -G "/usr/lib/llvm-*/lib/clang/*/include/omp.h" >/dev/null'
