@@ -142,6 +142,18 @@ TEMPLATE_LIST_TEST_CASE("Images copy between backends and reduce", "[core]", emf
   CHECK_THROWS_AS((Image<float, B>{-1, 3}), std::invalid_argument);
 }
 
+TEST_CASE("inside_border keeps the pixels at least `border` from every edge", "[core]") {
+  const ImageView<const int> view{nullptr, 7, 5};
+  int inside = 0;
+  for (int i = 0; i < view.size(); ++i) {
+    const int x = i % 7, y = i / 7;
+    CHECK(view.inside_border(i, 0));
+    CHECK(view.inside_border(i, 1) == (x >= 1 && y >= 1 && x <= 5 && y <= 3));
+    inside += view.inside_border(i, 2);
+  }
+  CHECK(inside == 3);  // the middle row's three middle pixels
+}
+
 TEST_CASE("projected_box holds every pixel a box can project to, and little more", "[core]") {
   using S = double;
   const PinholeCamera<S> camera;  // 640x480, f = 525

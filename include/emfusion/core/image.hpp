@@ -31,6 +31,11 @@ struct ImageView {
   EMF_HD int size() const { return width * height; }
   EMF_HD bool empty() const { return data == nullptr || width <= 0 || height <= 0; }
   EMF_HD bool contains(int x, int y) const { return x >= 0 && y >= 0 && x < width && y < height; }
+  /// True if pixel index i lies at least `border` pixels inside every edge.
+  EMF_HD bool inside_border(int i, int border) const {
+    const int x = i % width, y = i / width;
+    return x >= border && y >= border && x < width - border && y < height - border;
+  }
 
   /// A read-only view of the same pixels (only for views of mutable pixels:
   /// a conversion of ImageView<const T> to itself would draw nvcc warnings).

@@ -58,8 +58,7 @@ struct CountObjectPixels {
   ImageView<const S> association;  // empty: not computed this frame
   int model, border;
   EMF_HD ObjectPixels operator()(int i) const {
-    const int u = i % label.width, v = i / label.width;
-    const bool inner = u >= border && v >= border && u < label.width - border && v < label.height - border;
+    const bool inner = label.inside_border(i, border);
     const bool drawn = label[i] == model;
     const S q = association.empty() ? S(0) : association[i];
     ObjectPixels p;
@@ -105,7 +104,6 @@ struct AddObjectPixel {
   }
 };
 
-
 /// Of the pixels inside the border that a model's rendering draws, those
 /// whose measured surface agrees with the model's and those where the frame
 /// shows a surface in front of it.
@@ -142,9 +140,7 @@ struct AddCoverPixel {
   int border;
   S tolerance;
   EMF_HD void operator()(int, const DrawnModel<S>& m, int i, CoverSums& acc) const {
-    if (m.hit.empty()) return;
-    const int u = i % points.width, v = i / points.width;
-    if (!m.hit[i] || u < border || v < border || u >= points.width - border || v >= points.height - border) return;
+    if (m.hit.empty() || !m.hit[i] || !points.inside_border(i, border)) return;
     const S gap = points[i].z() - m.depth[i];  // NaN where nothing was measured
     acc.v[0] += 1.0;
     if (std::fabs(gap) <= tolerance) acc.v[1] += 1.0;
@@ -252,14 +248,15 @@ int hold_unseen_objects(Map<S, B>& map, const Frame<S, B>& frame, const SystemPa
       models[std::size_t(k)] = {std::as_const(r.hit).view(), std::as_const(r.depth).view()};
   }
   DrawnCoverWorkspace<S, B> local_cover;
-  const std::vector<detail::lifecycle::CoverSums> covers =
-      params.hold_occluded_objects
-          ? reduce_per_group(frame.points.backend(), models, frame.points.size(),
-                             detail::lifecycle::AddCoverPixel<S>{frame.points.view(), border, params.likelihood.sigma},
-                             detail::lifecycle::CoverSums{}, cover_workspace ? *cover_workspace : local_cover)
-          : std::vector<detail::lifecycle::CoverSums>{};
+  std::vector<detail::lifecycle::DrawnCover> covers;
+  if (params.hold_occluded_objects)
+    for (const detail::lifecycle::CoverSums& c :
+         reduce_per_group(frame.points.backend(), models, frame.points.size(),
+                          detail::lifecycle::AddCoverPixel<S>{frame.points.view(), border, params.likelihood.sigma},
+                          detail::lifecycle::CoverSums{}, cover_workspace ? *cover_workspace : local_cover))
+      covers.push_back(c.counts());
   const auto covered = [&](int k) {
-    const detail::lifecycle::DrawnCover c = covers[std::size_t(k)].counts();
+    const detail::lifecycle::DrawnCover& c = covers[std::size_t(k)];
     return c.drawn >= min_pixels && c.front > c.agree;
   };
   bool any_covered = false;
@@ -269,7 +266,7 @@ int hold_unseen_objects(Map<S, B>& map, const Frame<S, B>& frame, const SystemPa
                                                ? all_object_pixels(frame, n, border, workspace ? *workspace : local)
                                                : std::vector<ObjectPixels>{};
   const auto hidden = [&](int k) {
-    return covered(k) && pixels[std::size_t(k)].associated_inner <= 2 * covers[std::size_t(k)].counts().agree;
+    return covered(k) && pixels[std::size_t(k)].associated_inner <= 2 * covers[std::size_t(k)].agree;
   };
   // The young rule: cut by the border or gone.
   const auto unseen = [&](int k) {

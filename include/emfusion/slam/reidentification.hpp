@@ -97,9 +97,7 @@ struct CountInView {
   int border;
   S tolerance;
   EMF_HD InViewPixels operator()(int i) const {
-    const int width = segmentation.width, u = i % width, v = i / width;
-    if (u < border || v < border || u >= width - border || v >= segmentation.height - border) return {};
-    if (!model.hit[i] || segmentation[i] > 0) return {};
+    if (!segmentation.inside_border(i, border) || !model.hit[i] || segmentation[i] > 0) return {};
     const S gap = model.gap(i);
     if (!std::isfinite(gap)) return {};
     if (std::fabs(gap) <= tolerance) return {1, 0};

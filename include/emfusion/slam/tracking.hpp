@@ -62,7 +62,6 @@ PoseStep step_between(const SE3<S>& from, const SE3<S>& to) {
   return {double(norm(d.translation())), double(norm(so3_log(d.rotation())))};
 }
 
-
 /// The outcome of a solve that proposed `T_new`: accepted only if it found a
 /// solution with at least `min_terms` terms that moves less than `bound`.
 template <class S>
