@@ -1018,6 +1018,23 @@ def selftest():
     assert failed_targets(ra) == (0, 2) and failed_targets(rb) == (1, 2)
     assert differences(ra, rb) == [('s1 cup_1 ate', 0.002, 0.03),
                                    ('s1 cup_1 pass obj_ate', True, False)], differences(ra, rb)
+    # compare's bad input: one clear message naming the file
+    for bad, words in ((['/nonexistent/a.json', '/nonexistent/b.json'], '/nonexistent/a.json'),
+                       (['only-one.json'], 'two files')):
+        try:
+            compare(bad)
+            raise AssertionError('compare accepted %s' % bad)
+        except SystemExit as e:
+            assert words in str(e), e
+    with tempfile.TemporaryDirectory() as d:
+        p = os.path.join(d, 'list.json')
+        with open(p, 'w') as f:
+            json.dump([1, 2], f)
+        try:
+            compare([p, p])
+            raise AssertionError('compare accepted a list')
+        except SystemExit as e:
+            assert p in str(e) and 'not a report' in str(e), e
     print('selftest: all checks passed')
     return 0
 
