@@ -706,6 +706,15 @@ TEST_CASE("Hostile frames: the guards' parameters are validated", "[slam]") {
         std::string::npos);
   CHECK(error([](SystemParams<float>& p) { p.refind_moving_seconds = INFINITY; }).find("refind_moving_seconds") !=
         std::string::npos);
+  CHECK(error([](SystemParams<float>& p) { p.reidentify_mask_fraction = 1; }).empty());  // the creation rule
+  for (const double bad : {0.0, 1.5, double(NAN)})
+    CHECK(error([bad](SystemParams<float>& p) { p.reidentify_mask_fraction = bad; }).find("reidentify_mask_fraction") !=
+          std::string::npos);
+  CHECK(error([](SystemParams<float>& p) { p.hidden_moving_seconds = 0; }).empty());  // held where it was
+  CHECK(error([](SystemParams<float>& p) { p.hidden_moving_seconds = -0.5f; }).find("hidden_moving_seconds") !=
+        std::string::npos);
+  CHECK(error([](SystemParams<float>& p) { p.hidden_moving_seconds = NAN; }).find("hidden_moving_seconds") !=
+        std::string::npos);
   // The camera's own solve settings.
   CHECK(error([](SystemParams<float>& p) { p.camera_pixel_stride = 3; }).empty());
   CHECK(error([](SystemParams<float>& p) { p.camera_converged_step = 0; }).empty());  // off

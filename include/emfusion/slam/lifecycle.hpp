@@ -19,6 +19,7 @@
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
+#include <limits>
 #include <memory>
 #include <optional>
 #include <utility>
@@ -213,9 +214,11 @@ std::vector<ObjectPixels> all_object_pixels(const Frame<S, B>& frame, int count,
 ///   covers at least keep_mask_pixels inside the border and is more often
 ///   behind a surface of the frame nearer by twice likelihood.sigma than
 ///   within likelihood.sigma of it moves on at its mean velocity of the last
-///   0.2 s (carry_on; stays at `before` without one): something passes in
-///   front of it, and the part left of it would pull it along with the
-///   surface in front (docs/system.md, "Held while hidden").
+///   0.2 s (carry_on; stays at `before` without one) for up to
+///   hidden_moving_seconds after its last tracked frame, then stays:
+///   something passes in front of it, and the part left of it would pull
+///   it along with the surface in front (docs/system.md, "Held while
+///   hidden").
 /// The segmentation is the last frame's, whose labels may no longer be the
 /// objects' order, so it is not used. With the hidden rule one pass over
 /// the frame for every object's cover; one more for the E-step counts on
@@ -287,12 +290,18 @@ int hold_unseen_objects(Map<S, B>& map, const Frame<S, B>& frame, const SystemPa
       pose = before[std::size_t(k)];
       outcome = TrackingOutcome::moved_on;
       // From its pose of the last frame (a frame or two dropped between:
-      // still within a second).
-      if (!camera.empty())
-        if (const std::optional<SE3<double>> p =
-                carry_on(map.record_of(o.id()).trajectory, camera.back().timestamp, timestamp, 1.0))
-          if (is_finite(p->template cast<S>())) pose = p->template cast<S>();
+      // still within a second), while it was tracked at most
+      // hidden_moving_seconds ago.
+      ObjectRecord& record = map.record_of(o.id());
+      if (!camera.empty()) {
+        const double last = camera.back().timestamp;
+        if (std::isnan(record.hidden_since)) record.hidden_since = last;
+        if (timestamp - record.hidden_since <= double(params.hidden_moving_seconds))
+          if (const std::optional<SE3<double>> p = carry_on(record.trajectory, last, timestamp, 1.0))
+            if (is_finite(p->template cast<S>())) pose = p->template cast<S>();
+      }
     }
+    if (!pose || outcome != TrackingOutcome::moved_on) map.record_of(o.id()).hidden_since = std::numeric_limits<double>::quiet_NaN();
     if (!pose) continue;
     o.restore_pose(*pose);
     tracks[std::size_t(k)].outcome = outcome;

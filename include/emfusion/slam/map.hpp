@@ -8,6 +8,7 @@
 
 #include <algorithm>
 #include <cstddef>
+#include <limits>
 #include <memory>
 #include <stdexcept>
 #include <string>
@@ -34,6 +35,9 @@ struct ObjectRecord {
   DeletionReason reason = DeletionReason::none;
   bool person = false;     ///< class person with ignore_person: not rendered or exported
   Trajectory trajectory;   ///< T_world_object per frame it existed
+  /// While it is held hidden behind others (hold_occluded_objects): the
+  /// time of the last frame it was tracked in; NaN otherwise.
+  double hidden_since = std::numeric_limits<double>::quiet_NaN();
 };
 
 /// An object deleted as not visible, kept for re-identification
@@ -83,6 +87,7 @@ struct Map {
     ObjectRecord& rec = record_of(objects.back()->id());
     rec.deleted = false;
     rec.reason = DeletionReason::none;
+    rec.hidden_since = std::numeric_limits<double>::quiet_NaN();
     return *objects.back();
   }
 

@@ -152,6 +152,12 @@ struct SystemParams {
   /// turned; docs/system.md, "Lost objects"). 1: the last pose always wins
   /// when it fits; 0: the best fit wins.
   double reidentify_keep_margin = 0.05;
+  /// A detection re-identifies a lost object with at least this fraction
+  /// of min_mask_pixels points of its own (creating an object takes all of
+  /// them, the paper's 40x40 pixels): the known model, its fit and its
+  /// drawn cover check a smaller one (docs/system.md, "Lost objects"). 1:
+  /// the creation rule.
+  double reidentify_mask_fraction = 0.5;
   /// Objects left behind (docs/system.md): on a detector frame, a live
   /// object that no detection matched and whose mean association over the
   /// pixels it is drawn on is below this is tried against the unmatched
@@ -183,6 +189,10 @@ struct SystemParams {
   /// than shown by it is not tracked: it moves on at its velocity instead
   /// of following the part left of it (hold_unseen_objects, lifecycle.hpp).
   bool hold_occluded_objects = true;
+  /// ... for up to this long after its last tracked frame (seconds); after
+  /// that it stays where its motion took it until it shows again: objects
+  /// stop, and a velocity carried on over seconds runs away from them.
+  S hidden_moving_seconds = S(0.5);
   /// Lost objects come back without a detection when the frame shows their
   /// model where they were lost (refind_in_view, reidentification.hpp):
   /// an object that left the view, or stood hidden behind another, while
@@ -206,6 +216,12 @@ struct SystemParams {
   /// min_mask_pixels for a width x height image (it is given for 640x480).
   int min_mask_pixels_for(int width, int height) const {
     return std::max(1, int(std::lround(double(min_mask_pixels) * width * height / (640.0 * 480.0))));
+  }
+  /// The points of its own a detection needs to re-identify a lost object
+  /// in a width x height image (min_mask_pixels_for times
+  /// reidentify_mask_fraction, at least 1).
+  int reidentify_mask_pixels_for(int width, int height) const {
+    return std::max(1, int(std::lround(reidentify_mask_fraction * min_mask_pixels_for(width, height))));
   }
   /// The visible pixels below which an object in the map is not visible
   /// (min_mask_pixels_for times keep_visible_fraction, at least 1).
@@ -277,8 +293,12 @@ struct SystemParams {
     detail::require(relocalize_below >= 0 && relocalize_below <= 1, w, "relocalize_below must be in [0, 1]");
     detail::require(refind_moving_seconds >= 0 && std::isfinite(double(refind_moving_seconds)), w,
                     "refind_moving_seconds must be finite and not negative");
+    detail::require(hidden_moving_seconds >= 0 && std::isfinite(double(hidden_moving_seconds)), w,
+                    "hidden_moving_seconds must be finite and not negative");
     detail::require(reidentify_keep_margin >= 0 && reidentify_keep_margin <= 1, w,
                     "reidentify_keep_margin must be in [0, 1]");
+    detail::require(reidentify_mask_fraction > 0 && reidentify_mask_fraction <= 1, w,
+                    "reidentify_mask_fraction must be in (0, 1]");
     detail::require(merge_min_inliers >= 0 && merge_min_inliers <= 1, w, "merge_min_inliers must be in [0, 1]");
     detail::require(background_integration.max_weight > S(0) && object_integration.max_weight > S(0), w,
                     "max_weight must be positive");

@@ -120,16 +120,19 @@ struct DetectionTarget {
 };
 
 /// The target of detection d, or nothing when it is of a static class or
-/// has fewer than min_mask_pixels points of its own.
+/// has fewer than `min_points` points of its own (min_mask_pixels when
+/// not given).
 template <class S, Backend B>
 std::optional<DetectionTarget<S, B>> detection_target(const Frame<S, B>& frame, const Detections& det, int d,
                                                       const std::vector<int>& seg, const std::vector<Vec3<S>>& points,
-                                                      const PinholeCamera<S>& camera, const SystemParams<S>& params) {
+                                                      const PinholeCamera<S>& camera, const SystemParams<S>& params,
+                                                      std::optional<int> min_points = std::nullopt) {
   const Instance& inst = det.instances[std::size_t(d)];
   if (is_listed_class(inst.class_name, params.static_classes)) return std::nullopt;
   const std::vector<Vec3<S>> p = largest_depth_group(detection_points(points, det.labels.view().data, inst.label, &seg),
                                                      params.object_depth_gap);
-  if (int(p.size()) < params.min_mask_pixels_for(camera.width, camera.height)) return std::nullopt;
+  if (int(p.size()) < min_points.value_or(params.min_mask_pixels_for(camera.width, camera.height)))
+    return std::nullopt;
   DetectionTarget<S, B> t;
   t.points = p.size();
   t.centroid = Vec3<S>::zero();
@@ -265,7 +268,8 @@ std::optional<NewObjectWeights<S, B>> reidentify(Map<S, B>& map, const Frame<S, 
                                                  const Solver& solver, S outside) {
   if (map.lost.empty() || int(map.objects.size()) >= params.max_objects) return std::nullopt;
   const Instance& inst = det.instances[std::size_t(d)];
-  const auto target = detail::reidentification::detection_target(frame, det, d, seg, points, camera, params);
+  const auto target = detail::reidentification::detection_target(
+      frame, det, d, seg, points, camera, params, params.reidentify_mask_pixels_for(camera.width, camera.height));
   if (!target) return std::nullopt;
   int best = -1;
   double best_inliers = 0;
