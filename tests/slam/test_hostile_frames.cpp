@@ -707,7 +707,8 @@ TEST_CASE("Hostile frames: the guards' parameters are validated", "[slam]") {
   CHECK(error([](SystemParams<float>& p) { p.refind_moving_seconds = INFINITY; }).find("refind_moving_seconds") !=
         std::string::npos);
   CHECK(error([](SystemParams<float>& p) { p.reidentify_mask_fraction = 1; }).empty());  // the creation rule
-  for (const double bad : {0.0, 1.5, double(NAN)})
+  const double bad_fractions[] = {0.0, 1.5, double(NAN)};
+  for (const double bad : bad_fractions)
     CHECK(error([bad](SystemParams<float>& p) { p.reidentify_mask_fraction = bad; }).find("reidentify_mask_fraction") !=
           std::string::npos);
   CHECK(error([](SystemParams<float>& p) { p.hidden_moving_seconds = 0; }).empty());  // held where it was

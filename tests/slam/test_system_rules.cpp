@@ -406,7 +406,8 @@ TEMPLATE_LIST_TEST_CASE("An object that left the view is re-identified when dete
     // the creation rule.
     REQUIRE(params.min_mask_pixels_for(scene.camera.width, scene.camera.height) == 100);
     REQUIRE(params.reidentify_mask_pixels_for(scene.camera.width, scene.camera.height) == 50);
-    for (const double fraction : {params.reidentify_mask_fraction, 1.0}) {
+    const double fractions[] = {params.reidentify_mask_fraction, 1.0};
+    for (const double fraction : fractions) {
       SystemParams<S> p = params;
       p.min_object_terms = 40;
       p.reidentify_mask_fraction = fraction;
