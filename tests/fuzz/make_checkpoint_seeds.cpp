@@ -84,9 +84,10 @@ int main(int argc, char** argv) {
   write(dir, "float_map.emfckpt", f);
   write(dir, "double_map.emfckpt", d);
   write(dir, "float_sparse_map.emfckpt", small_checkpoint<float>(true));
-  // float_map_v1.emfckpt beside them is the same map in format version 1
-  // (written by this program before version 2), kept so that the fuzzer
-  // starts from the older layout too.
+  // float_map_v1.emfckpt and float_map_v2.emfckpt beside them are the
+  // same map in format versions 1 and 2 (written by this program before
+  // versions 2 and 3), kept so that the fuzzer starts from the older
+  // layouts too.
   write(dir, "truncated.emfckpt", f.substr(0, f.size() / 2));
   std::string flipped = f;
   flipped[f.size() / 2] = char(flipped[f.size() / 2] ^ 0x40);

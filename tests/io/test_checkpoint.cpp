@@ -2,6 +2,7 @@
 // continued gives the poses of a run that never stopped (bit for bit on the
 // CPU), a loaded map meshes like the saved one, and every damaged,
 // foreign, newer or mismatched checkpoint is refused naming the file.
+#include <bit>
 #include <cmath>
 #include <cstdint>
 #include <string>
@@ -223,9 +224,10 @@ TEST_CASE("Checkpoints: damaged, foreign, newer and mismatched checkpoints are r
   CHECK(contains(refusal("ply\nformat ascii 1.0\n"), "not an emfusion checkpoint"));
   std::string newer = bytes;
   newer[8] = char(checkpoint_version + 1);
-  CHECK(contains(refusal(newer), "version 3 is not supported"));
-  // Version 1 (a dense background without its kind byte) is still read,
-  // and an unknown kind is refused: payloads rebuilt with a right checksum.
+  CHECK(contains(refusal(newer), "version " + std::to_string(checkpoint_version + 1) + " is not supported"));
+  // Versions 1 (a dense background without its kind byte) and 2 (no hidden
+  // times of the records at the end) are still read, and an unknown kind
+  // is refused: payloads rebuilt with a right checksum.
   const auto rebuilt = [&](std::uint32_t version, const std::string& payload) {
     std::string out = bytes.substr(0, 8);
     detail::bytes::put_u32(out, version);
@@ -237,6 +239,9 @@ TEST_CASE("Checkpoints: damaged, foreign, newer and mismatched checkpoints are r
     return out;
   };
   const std::string payload = bytes.substr(24, bytes.size() - 28);
+  const std::size_t records = system.map().records.size();
+  REQUIRE(records > 0);
+  const std::string v2_payload = payload.substr(0, payload.size() - 8 * records);
   std::string kind_and_dims;  // the kind byte (0, dense), then the background's dimensions
   kind_and_dims += '\0';
   for (int a = 0; a < 3; ++a) detail::bytes::put_i32(kind_and_dims, 128);
@@ -244,10 +249,27 @@ TEST_CASE("Checkpoints: damaged, foreign, newer and mismatched checkpoints are r
   REQUIRE(kind_at != std::string::npos);
   REQUIRE(payload.find(kind_and_dims, kind_at + 1) == std::string::npos);
   const std::string v1 = dir.file("v1.emfckpt");
-  emfusion::test::write_bytes(v1, rebuilt(1, payload.substr(0, kind_at) + payload.substr(kind_at + 1)));
+  emfusion::test::write_bytes(v1, rebuilt(1, v2_payload.substr(0, kind_at) + v2_payload.substr(kind_at + 1)));
   const Checkpoint<S> old = load_checkpoint<S>(v1);
   REQUIRE(old.map.background.dense() != nullptr);
-  CHECK(checkpoint_bytes(old.map, old.camera) == bytes);
+  CHECK(checkpoint_bytes(old.map, old.camera) == bytes);  // no object was held hidden: NaN times
+  const std::string v2 = dir.file("v2.emfckpt");
+  emfusion::test::write_bytes(v2, rebuilt(2, v2_payload));
+  const Checkpoint<S> two = load_checkpoint<S>(v2);
+  CHECK(checkpoint_bytes(two.map, two.camera) == bytes);
+  // The records' hidden times: the last record's, set, comes back; an
+  // infinite one is refused, and so are bytes after them.
+  const auto with_last_time = [&](double t) {
+    std::string p = payload;
+    std::string v;
+    detail::bytes::put_u64(v, std::bit_cast<std::uint64_t>(t));
+    p.replace(p.size() - 8, 8, v);
+    return rebuilt(checkpoint_version, p);
+  };
+  emfusion::test::write_bytes(bad, with_last_time(1.25));
+  CHECK(load_checkpoint<S>(bad).map.records.back().hidden_since == 1.25);
+  CHECK(contains(refusal(with_last_time(INFINITY)), "infinite hidden time"));
+  CHECK(contains(refusal(rebuilt(checkpoint_version, payload + "12345678")), "bytes follow the records' hidden times"));
   std::string unknown_kind = payload;
   unknown_kind[kind_at] = 2;
   CHECK(contains(refusal(rebuilt(checkpoint_version, unknown_kind)), "unknown background kind 2"));

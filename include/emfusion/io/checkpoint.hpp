@@ -41,8 +41,9 @@
 namespace emfusion {
 
 /// The version save_checkpoint writes; the reader refuses newer ones.
-/// Version 1 held a dense background only; version 2 says which kind it is.
-inline constexpr std::uint32_t checkpoint_version = 2;
+/// Version 1 held a dense background only; version 2 says which kind it is;
+/// version 3 adds the records' hidden times (ObjectRecord::hidden_since).
+inline constexpr std::uint32_t checkpoint_version = 3;
 /// The first 8 bytes of every checkpoint.
 inline constexpr char checkpoint_magic[8] = {'E', 'M', 'F', 'C', 'K', 'P', 'T', '\0'};
 
@@ -439,6 +440,7 @@ std::string checkpoint_bytes(const Map<S, B>& map, const PinholeCamera<S>& camer
     w.i32(l.lost_at);
     w.object(*l.object);
   }
+  for (const ObjectRecord& r : map.records) w.f64(r.hidden_since);  // version 3
 
   std::string out(checkpoint_magic, checkpoint_magic + 8);
   detail::bytes::put_u32(out, checkpoint_version);
@@ -549,7 +551,14 @@ Checkpoint<S, B> parse_checkpoint(const std::string& data, const std::string& so
     l.object = r.template object<S, B>(backend);
     map.lost.push_back(std::move(l));
   }
-  if (r.left() != 0) r.fail(std::to_string(r.left()) + " bytes follow the last lost object");
+  // Version 3: since when each record's object is held hidden (NaN: it is not).
+  if (version >= 3)
+    for (ObjectRecord& rec : map.records) {
+      rec.hidden_since = r.f64("an object record's hidden time");
+      if (std::isinf(rec.hidden_since)) r.fail("object record " + std::to_string(rec.id) + ": infinite hidden time");
+    }
+  if (r.left() != 0)
+    r.fail(std::to_string(r.left()) + " bytes follow the " + (version >= 3 ? "records' hidden times" : "last lost object"));
   // Every live and lost object has a record (Map::record_of relies on it).
   const auto has_record = [&](int id) {
     for (const ObjectRecord& rec : map.records)
