@@ -401,9 +401,10 @@ TEMPLATE_LIST_TEST_CASE("An object that left the view is re-identified when dete
   SECTION("a detection smaller than the creation rule brings it back, by reidentify_mask_fraction") {
     // About 70 of its pixels, spread over it (a detector's sparse mask):
     // fewer than the 100 (40x40 at 640x480) an object needs to be
-    // created, more than the half of them a re-identification needs. The same state in systems that take a fit of 40 terms
-    // (parameters are not part of a checkpoint), with the default and with
-    // the creation rule.
+    // created, more than the half of them a re-identification needs. The
+    // same state in systems that take a fit of 40 terms (parameters are
+    // not part of a checkpoint), with the default and with the creation
+    // rule.
     REQUIRE(params.min_mask_pixels_for(scene.camera.width, scene.camera.height) == 100);
     REQUIRE(params.reidentify_mask_pixels_for(scene.camera.width, scene.camera.height) == 50);
     const double fractions[] = {params.reidentify_mask_fraction, 1.0};

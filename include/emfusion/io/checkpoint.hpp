@@ -558,7 +558,8 @@ Checkpoint<S, B> parse_checkpoint(const std::string& data, const std::string& so
       if (std::isinf(rec.hidden_since)) r.fail("object record " + std::to_string(rec.id) + ": infinite hidden time");
     }
   if (r.left() != 0)
-    r.fail(std::to_string(r.left()) + " bytes follow the " + (version >= 3 ? "records' hidden times" : "last lost object"));
+    r.fail(std::to_string(r.left()) + " bytes follow the " +
+           (version >= 3 ? "records' hidden times" : "last lost object"));
   // Every live and lost object has a record (Map::record_of relies on it).
   const auto has_record = [&](int id) {
     for (const ObjectRecord& rec : map.records)

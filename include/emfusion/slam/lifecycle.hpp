@@ -301,7 +301,8 @@ int hold_unseen_objects(Map<S, B>& map, const Frame<S, B>& frame, const SystemPa
             if (is_finite(p->template cast<S>())) pose = p->template cast<S>();
       }
     }
-    if (!pose || outcome != TrackingOutcome::moved_on) map.record_of(o.id()).hidden_since = std::numeric_limits<double>::quiet_NaN();
+    if (!pose || outcome != TrackingOutcome::moved_on)
+      map.record_of(o.id()).hidden_since = std::numeric_limits<double>::quiet_NaN();
     if (!pose) continue;
     o.restore_pose(*pose);
     tracks[std::size_t(k)].outcome = outcome;
