@@ -209,6 +209,31 @@ TEMPLATE_LIST_TEST_CASE("Stages alone: the E-step at known poses, one tracking s
   CHECK(one_by_one[0].report.reason == tracks[0].report.reason);
   CHECK(one_by_one[0].report.terms == tracks[0].report.terms);
   CHECK(double(norm(m.map.objects[0]->pose().translation() - batched.translation())) < 1e-4);
+
+  // An object flagged to be skipped (hold_decisions) is not solved, with
+  // either solver: not tracked, no terms, its pose left as it was.
+  const std::vector<bool> skip{true};
+  const SE3<S> unsolved = SE3<S>::translation(before.translation() + vec3(S(0.03), S(0), S(0))) *
+                          SE3<S>(before.rotation(), Vec3<S>::zero());
+  TrackingWorkspace<S, B>* const no_workspace = nullptr;
+  const std::vector<PoseStarts<S>>* const no_starts = nullptr;
+  for (int solver = 0; solver < 2; ++solver) {
+    m.map.objects[0]->set_pose(unsolved);
+    const std::vector<PoseTrack> skipped =
+        solver == 0 ? track_objects(m.map, m.frame, m.s.params, HuberNorm<S>{S(2)}, LevenbergMarquardt{},
+                                    no_workspace, no_starts, &skip)
+                    : track_objects(m.map, m.frame, m.s.params, HuberNorm<S>{S(2)}, LevenbergMarquardtOneByOne{},
+                                    no_workspace, no_starts, &skip);
+    REQUIRE(skipped.size() == 1);
+    CHECK(skipped[0].outcome == TrackingOutcome::not_tracked);
+    CHECK(skipped[0].attempts == 0);
+    CHECK(skipped[0].report.terms == 0);
+    CHECK(double(norm(m.map.objects[0]->pose().translation() - unsolved.translation())) == 0);
+  }
+  const std::vector<bool> wrong_size{false, false};
+  CHECK_THROWS_WITH(track_objects(m.map, m.frame, m.s.params, HuberNorm<S>{S(2)}, LevenbergMarquardt{},
+                                  no_workspace, no_starts, &wrong_size),
+                    EMF_CONTAINS("one skip flag per live object"));
 }
 
 TEMPLATE_LIST_TEST_CASE("Stages alone: resizing from a detection, deletion by the existence rule", "[slam]",

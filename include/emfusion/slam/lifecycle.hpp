@@ -11,8 +11,8 @@
 // detector frame are spared the visibility rule until first seen, and not
 // tracked meanwhile while the image border cuts them; objects hidden behind
 // a nearer surface move on at their velocity instead of being tracked
-// (both hold_unseen_objects, which System runs right after tracking the
-// objects).
+// (both hold_decisions, which System runs before tracking the objects, so
+// that the held ones are not solved).
 #pragma once
 
 #include <algorithm>
@@ -199,16 +199,26 @@ std::vector<ObjectPixels> all_object_pixels(const Frame<S, B>& frame, int count,
   return out;
 }
 
-/// Objects the frame does not show well enough to track, after
-/// track_objects; each goes to a pose of its own, its outcome not_tracked
-/// (young) or moved_on (hidden).
+/// A held object's pose in this frame and its outcome (hold_decisions).
+template <class S>
+struct HeldPose {
+  SE3<S> pose;
+  TrackingOutcome outcome = TrackingOutcome::not_tracked;
+};
+
+/// Objects the frame does not show well enough to track, decided before
+/// their solves (from this frame's E-step at the predicted poses and the
+/// objects' renderings of the last frame): per object the pose it goes to
+/// and its outcome, not_tracked (young) or moved_on (hidden), or nothing
+/// where it is tracked. System has track_objects skip the held objects
+/// and then puts them at their poses (apply_holds).
 /// - The grace's other half (SystemParams::hold_unseen_objects): a young
-///   object (Map::young) that this frame's E-step (from before the objects'
-///   solves) shows cut by the image border or gone from it (fewer than
-///   keep_mask_pixels of its association above 1/2 inside the visibility
-///   border, and less there than in the border band, or fewer than
-///   min_object_terms in all) goes back to the pose it had before the frame
-///   (`before`). A small object wholly in view is tracked as ever.
+///   object (Map::young) that this frame's E-step shows cut by the image
+///   border or gone from it (fewer than keep_mask_pixels of its
+///   association above 1/2 inside the visibility border, and less there
+///   than in the border band, or fewer than min_object_terms in all) goes
+///   back to the pose it had before the frame (`before`). A small object
+///   wholly in view is tracked as ever.
 /// - Hidden (SystemParams::hold_occluded_objects): any other object whose
 ///   model, as drawn at its last pose (its rendering of the last frame),
 ///   covers at least keep_mask_pixels inside the border and is more often
@@ -218,24 +228,24 @@ std::vector<ObjectPixels> all_object_pixels(const Frame<S, B>& frame, int count,
 ///   hidden_moving_seconds after its last tracked frame, then stays:
 ///   something passes in front of it, and the part left of it would pull
 ///   it along with the surface in front (docs/system.md, "Held while
-///   hidden").
+///   hidden"). Its record keeps since when (ObjectRecord::hidden_since).
 /// The segmentation is the last frame's, whose labels may no longer be the
 /// objects' order, so it is not used. With the hidden rule one pass over
 /// the frame for every object's cover; one more for the E-step counts on
 /// frames with young objects or an object the cover finds behind others.
-/// Returns how many were held.
 template <class S, Backend B>
-int hold_unseen_objects(Map<S, B>& map, const Frame<S, B>& frame, const SystemParams<S>& params,
-                        const std::vector<SE3<S>>& before, std::vector<PoseTrack>& tracks, double timestamp,
-                        ObjectPixelsWorkspace<S, B>* workspace = nullptr,
-                        DrawnCoverWorkspace<S, B>* cover_workspace = nullptr) {
+std::vector<std::optional<HeldPose<S>>> hold_decisions(Map<S, B>& map, const Frame<S, B>& frame,
+                                                       const SystemParams<S>& params,
+                                                       const std::vector<SE3<S>>& before, double timestamp,
+                                                       ObjectPixelsWorkspace<S, B>* workspace = nullptr,
+                                                       DrawnCoverWorkspace<S, B>* cover_workspace = nullptr) {
   const int n = int(map.objects.size());
-  detail::require(int(before.size()) == n && int(tracks.size()) == n, "hold_unseen_objects",
-                  "need one pose and one track per live object");
+  detail::require(int(before.size()) == n, "hold_decisions", "need one pose per live object");
+  std::vector<std::optional<HeldPose<S>>> held(static_cast<std::size_t>(n));
   bool any_young = false;
   for (const auto& o : map.objects) any_young = any_young || map.is_young(o->id());
   const bool young_rule = params.hold_unseen_objects && any_young;
-  if (!young_rule && !params.hold_occluded_objects) return 0;
+  if (!young_rule && !params.hold_occluded_objects) return held;
   const int border = params.visibility_border_for(frame.segmentation.width());
   const int min_pixels = params.keep_mask_pixels_for(frame.segmentation.width(), frame.segmentation.height());
   // The hidden rule: more of its model is behind a nearer surface than
@@ -278,37 +288,58 @@ int hold_unseen_objects(Map<S, B>& map, const Frame<S, B>& frame, const SystemPa
     return px.associated_inner < min_pixels && (cut || gone);
   };
   const Trajectory& camera = map.camera_trajectory;
-  int held = 0;
   for (int k = 0; k < n; ++k) {
-    ObjectModel<S, B>& o = *map.objects[std::size_t(k)];
+    const ObjectModel<S, B>& o = *map.objects[std::size_t(k)];
     const bool young = map.is_young(o.id());
-    std::optional<SE3<S>> pose;
-    TrackingOutcome outcome = TrackingOutcome::not_tracked;
+    ObjectRecord& record = map.record_of(o.id());
+    std::optional<HeldPose<S>>& h = held[std::size_t(k)];
     if (young && young_rule && unseen(k)) {
-      pose = before[std::size_t(k)];
+      h = HeldPose<S>{before[std::size_t(k)], TrackingOutcome::not_tracked};
     } else if (!young && params.hold_occluded_objects && hidden(k)) {
-      pose = before[std::size_t(k)];
-      outcome = TrackingOutcome::moved_on;
+      h = HeldPose<S>{before[std::size_t(k)], TrackingOutcome::moved_on};
       // From its pose of the last frame (a frame or two dropped between:
       // still within a second), while it was tracked at most
       // hidden_moving_seconds ago.
-      ObjectRecord& record = map.record_of(o.id());
       if (!camera.empty()) {
         const double last = camera.back().timestamp;
         if (std::isnan(record.hidden_since)) record.hidden_since = last;
         if (timestamp - record.hidden_since <= double(params.hidden_moving_seconds))
           if (const std::optional<SE3<double>> p = carry_on(record.trajectory, last, timestamp, 1.0))
-            if (is_finite(p->template cast<S>())) pose = p->template cast<S>();
+            if (is_finite(p->template cast<S>())) h->pose = p->template cast<S>();
       }
     }
-    if (!pose || outcome != TrackingOutcome::moved_on)
-      map.record_of(o.id()).hidden_since = std::numeric_limits<double>::quiet_NaN();
-    if (!pose) continue;
-    o.restore_pose(*pose);
-    tracks[std::size_t(k)].outcome = outcome;
-    ++held;
+    if (!h || h->outcome != TrackingOutcome::moved_on) record.hidden_since = std::numeric_limits<double>::quiet_NaN();
   }
   return held;
+}
+
+/// Puts each object held (hold_decisions) at its pose and its outcome into
+/// `tracks` (one per live object, from track_objects); returns how many.
+template <class S, Backend B>
+int apply_holds(Map<S, B>& map, const std::vector<std::optional<HeldPose<S>>>& held, std::vector<PoseTrack>& tracks) {
+  const std::size_t n = map.objects.size();
+  detail::require(held.size() == n && tracks.size() == n, "apply_holds",
+                  "need one decision and one track per live object");
+  int count = 0;
+  for (std::size_t k = 0; k < n; ++k) {
+    if (!held[k]) continue;
+    map.objects[k]->restore_pose(held[k]->pose);
+    tracks[k].outcome = held[k]->outcome;
+    ++count;
+  }
+  return count;
+}
+
+/// The holds after track_objects has solved every object (hold_decisions,
+/// then apply_holds): the same poses and outcomes as when the held objects
+/// are skipped, at the price of their solves. Returns how many were held.
+template <class S, Backend B>
+int hold_unseen_objects(Map<S, B>& map, const Frame<S, B>& frame, const SystemParams<S>& params,
+                        const std::vector<SE3<S>>& before, std::vector<PoseTrack>& tracks, double timestamp,
+                        ObjectPixelsWorkspace<S, B>* workspace = nullptr,
+                        DrawnCoverWorkspace<S, B>* cover_workspace = nullptr) {
+  detail::require(tracks.size() == map.objects.size(), "hold_unseen_objects", "need one track per live object");
+  return apply_holds(map, hold_decisions(map, frame, params, before, timestamp, workspace, cover_workspace), tracks);
 }
 
 /// What tracking did with Map::objects[k] this frame and what the deletion

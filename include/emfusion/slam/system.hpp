@@ -241,12 +241,16 @@ class System {
       const std::vector<PoseStarts<S>> object_starts = predict_objects(map_, timestamp, params_);
       associate(map_, frame_, parts_.likelihood, params_);
       clock_.lap(result.times.e_step);
-      frame_.object_tracks = track_objects(map_, frame_, params_, parts_.object_norm, parts_.solver,
-                                           &tracking_workspace_, &object_starts);
+      // Objects the frame does not show well enough are held, not solved.
       std::vector<SE3<S>> before;
       for (const PoseStarts<S>& s : object_starts) before.push_back(s.previous);
-      hold_unseen_objects(map_, frame_, params_, before, frame_.object_tracks, timestamp, &object_pixels_workspace_,
-                          &drawn_cover_workspace_);
+      const auto held = hold_decisions(map_, frame_, params_, before, timestamp, &object_pixels_workspace_,
+                                       &drawn_cover_workspace_);
+      std::vector<bool> skip;
+      for (const auto& h : held) skip.push_back(h.has_value());
+      frame_.object_tracks = track_objects(map_, frame_, params_, parts_.object_norm, parts_.solver,
+                                           &tracking_workspace_, &object_starts, &skip);
+      apply_holds(map_, held, frame_.object_tracks);
       for (const PoseTrack& t : frame_.object_tracks) result.objects.push_back(t.report);
       clock_.lap(result.times.track_objects);
     }

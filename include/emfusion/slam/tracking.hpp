@@ -326,14 +326,22 @@ PoseTrack track_camera(Map<S, B>& map, const Frame<S, B>& frame, const SystemPar
 /// each iteration one pass over all their terms, and on CUDA no host in the
 /// loop); with any other solver one after another, on CUDA from host threads
 /// on streams of their own. The poses are applied afterwards in object order.
+/// With `skip` (one flag per object), the objects flagged are not solved:
+/// their tracks stay not_tracked, and their poses go back as for a solve
+/// that was not (hold_decisions gives such flags).
 template <class S, Backend B, class Norm, class Solver>
   requires RobustNorm<Norm, S> && PoseSolver<Solver, S>
 std::vector<PoseTrack> track_objects(Map<S, B>& map, const Frame<S, B>& frame, const SystemParams<S>& params,
                                      const Norm& norm, const Solver& solver,
                                      TrackingWorkspace<S, B>* workspace = nullptr,
-                                     const std::vector<PoseStarts<S>>* starts = nullptr) {
+                                     const std::vector<PoseStarts<S>>* starts = nullptr,
+                                     const std::vector<bool>* skip = nullptr) {
   const std::size_t n = map.objects.size();
   detail::require(!starts || starts->size() == n, "track_objects", "need one PoseStarts per live object");
+  detail::require(!skip || skip->size() == n, "track_objects", "need one skip flag per live object");
+  std::vector<std::size_t> solved;  // the objects solved, in object order
+  for (std::size_t k = 0; k < n; ++k)
+    if (!skip || !(*skip)[k]) solved.push_back(k);
   TrackingWorkspace<S, B> local;
   TrackingWorkspace<S, B>& ws = workspace ? *workspace : local;
   const SdfAlignmentParams<S> align = alignment_params(params, params.object_integration.max_weight);
@@ -361,27 +369,35 @@ std::vector<PoseTrack> track_objects(Map<S, B>& map, const Frame<S, B>& frame, c
   };
   if constexpr (solved_in_batches<Solver>) {
     using Terms = sdf_alignment_terms_t<S, TsdfVolume<S, B>>;
+    const std::size_t m = solved.size();
     std::vector<Terms> terms;
     std::vector<decltype(scaled_norm(norm, S(1)))> norms;
     std::vector<PoseStarts<S>> from, in;
     // Every object's box of associated pixels in one reduction (on a GPU
     // one wait, not one an object).
     std::vector<const Image<S, B>*> associations;
-    for (std::size_t k = 0; k < n; ++k) associations.push_back(&frame.associations.image(int(k) + 1));
+    for (std::size_t k : solved) associations.push_back(&frame.associations.image(int(k) + 1));
     const std::vector<PixelBox> boxes =
-        align.use_association ? positive_boxes(backend, associations) : std::vector<PixelBox>(n);
-    for (std::size_t k = 0; k < n; ++k) {
-      const TsdfVolume<S, B>& volume = map.objects[k]->volume();
-      terms.push_back(sdf_alignment_in_box(volume, frame.points, associations[k], align, boxes[k]));
+        align.use_association && m > 0 ? positive_boxes(backend, associations) : std::vector<PixelBox>(m);
+    for (std::size_t j = 0; j < m; ++j) {
+      const TsdfVolume<S, B>& volume = map.objects[solved[j]]->volume();
+      terms.push_back(sdf_alignment_in_box(volume, frame.points, associations[j], align, boxes[j]));
       norms.push_back(scaled_norm(norm, volume.voxel_size()));
-      const auto world_and_volume = volume_starts(k);
+      const auto world_and_volume = volume_starts(solved[j]);
       from.push_back(world_and_volume.first), in.push_back(world_and_volume.second);
     }
-    const std::vector<SE3<S>> T_volume_camera = track_in_volumes(
-        backend, terms, norms, in, align, solver, params.retry_tracking,
-        [&](std::size_t k, const SE3<S>& T_vc, PoseTrack& t) { judge(k, from[k], T_vc, t); }, tracks, ws.object_batch);
-    for (std::size_t k = 0; k < n; ++k)
-      if (tracks[k].outcome == TrackingOutcome::tracked) T_world_object[k] = to_world(k, T_volume_camera[k]);
+    std::vector<PoseTrack> batch(m);
+    const std::vector<SE3<S>> T_volume_camera =
+        m == 0 ? std::vector<SE3<S>>{}
+               : track_in_volumes(
+                     backend, terms, norms, in, align, solver, params.retry_tracking,
+                     [&](std::size_t j, const SE3<S>& T_vc, PoseTrack& t) { judge(solved[j], from[j], T_vc, t); },
+                     batch, ws.object_batch);
+    for (std::size_t j = 0; j < m; ++j) {
+      tracks[solved[j]] = batch[j];
+      if (batch[j].outcome == TrackingOutcome::tracked)
+        T_world_object[solved[j]] = to_world(solved[j], T_volume_camera[j]);
+    }
   } else {
     ws.object_caches.resize(n);
     const auto solve = [&](std::size_t k, const B& run_on) {
@@ -396,14 +412,15 @@ std::vector<PoseTrack> track_objects(Map<S, B>& map, const Frame<S, B>& frame, c
           [&](const SE3<S>& T_vc, PoseTrack& t) { judge(k, from, T_vc, t); }, tracks[k], ws.object_caches[k], run_on);
       if (tracks[k].outcome == TrackingOutcome::tracked) T_world_object[k] = to_world(k, T_volume_camera);
     };
-    if (ConcurrentLanes<B>::concurrent && n > 1) {
+    if (ConcurrentLanes<B>::concurrent && solved.size() > 1) {
       std::vector<B> lanes;
-      for (std::size_t k = 0; k < n; ++k) lanes.push_back(ws.lanes.lane(k, backend));
+      for (std::size_t k : solved) lanes.push_back(ws.lanes.lane(k, backend));
       std::vector<std::future<void>> running;
-      for (std::size_t k = 0; k < n; ++k) running.push_back(std::async(std::launch::async, solve, k, lanes[k]));
+      for (std::size_t j = 0; j < solved.size(); ++j)
+        running.push_back(std::async(std::launch::async, solve, solved[j], lanes[j]));
       for (auto& r : running) r.get();  // rethrows a solve's exception here
     } else {
-      for (std::size_t k = 0; k < n; ++k) solve(k, backend);
+      for (std::size_t k : solved) solve(k, backend);
     }
   }
   for (std::size_t k = 0; k < n; ++k) {
