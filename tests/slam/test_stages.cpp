@@ -22,6 +22,24 @@
 
 using namespace emfusion;
 
+// Outside the anonymous namespace: nvcc warns that a member template of a
+// type with internal linkage, instantiated only by the PoseSolver
+// concept's check, is "declared but never referenced".
+namespace stages_test {
+
+/// The library's Levenberg-Marquardt behind a type of its own: a user's
+/// solver, which tracking runs one problem at a time.
+struct LevenbergMarquardtOneByOne {
+  LevenbergMarquardt lm;
+  template <class F, class S>
+  SE3<S> solve(F&& linearize, const SE3<S>& start, SolveReport* report = nullptr) const {
+    return lm.solve(std::forward<F>(linearize), start, report);
+  }
+};
+
+}  // namespace stages_test
+using stages_test::LevenbergMarquardtOneByOne;
+
 namespace {
 
 /// A wall 2 m ahead, a box 0.8 m in front of it, a floor and a ball, seen by a
@@ -71,15 +89,6 @@ double mean_where(const std::vector<S>& values, const std::vector<int>& labels, 
   return n > 0 ? sum / n : -1.0;
 }
 
-/// The library's Levenberg-Marquardt behind a type of its own: a user's
-/// solver, which tracking runs one problem at a time.
-struct LevenbergMarquardtOneByOne {
-  LevenbergMarquardt lm;
-  template <class F, class S>
-  SE3<S> solve(F&& linearize, const SE3<S>& start, SolveReport* report = nullptr) const {
-    return lm.solve(std::forward<F>(linearize), start, report);
-  }
-};
 
 /// A map that fused the first view and holds an object made from the box's
 /// mask, as the stages leave it after one frame.
