@@ -41,7 +41,7 @@ inline const char* to_string(DeletionReason r) {
 enum class TrackingOutcome {
   /// No solve (or its pose not taken): a frame before or starting the map,
   /// an object created this frame, the objects of a frame whose camera was
-  /// not tracked, or a young object the image border cuts (hold_unseen_objects).
+  /// not tracked, or a young object the image border cuts (SystemParams::hold_unseen_objects).
   not_tracked,
   tracked,        ///< the solved pose was accepted
   too_few_terms,  ///< too few measurements met the model (no valid depth, out of view, outside the volume)

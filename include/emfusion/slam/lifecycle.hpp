@@ -330,18 +330,6 @@ int apply_holds(Map<S, B>& map, const std::vector<std::optional<HeldPose<S>>>& h
   return count;
 }
 
-/// The holds after track_objects has solved every object (hold_decisions,
-/// then apply_holds): the same poses and outcomes as when the held objects
-/// are skipped, at the price of their solves. Returns how many were held.
-template <class S, Backend B>
-int hold_unseen_objects(Map<S, B>& map, const Frame<S, B>& frame, const SystemParams<S>& params,
-                        const std::vector<SE3<S>>& before, std::vector<PoseTrack>& tracks, double timestamp,
-                        ObjectPixelsWorkspace<S, B>* workspace = nullptr,
-                        DrawnCoverWorkspace<S, B>* cover_workspace = nullptr) {
-  detail::require(tracks.size() == map.objects.size(), "hold_unseen_objects", "need one track per live object");
-  return apply_holds(map, hold_decisions(map, frame, params, before, timestamp, workspace, cover_workspace), tracks);
-}
-
 /// What tracking did with Map::objects[k] this frame and what the deletion
 /// rules see of it (`associated`: the association images are this frame's).
 /// `pixels`: its object_pixels, when already counted (all_object_pixels).

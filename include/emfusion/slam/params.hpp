@@ -187,7 +187,7 @@ struct SystemParams {
   /// An object whose model, drawn at its last pose, covers at least
   /// keep_mask_pixels and is more often behind a nearer surface of the frame
   /// than shown by it is not tracked: it moves on at its velocity instead
-  /// of following the part left of it (hold_unseen_objects, lifecycle.hpp).
+  /// of following the part left of it (hold_decisions, lifecycle.hpp).
   bool hold_occluded_objects = true;
   /// ... for up to this long after its last tracked frame (seconds); after
   /// that it stays where its motion took it until it shows again: objects
