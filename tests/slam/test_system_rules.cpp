@@ -8,8 +8,9 @@
 // from the pose they were lost in and only as far as they can have moved;
 // with refind_in_view found again without a detection where the frame shows
 // them where they were lost), a new object at the border survives until
-// seen, and an object that passes behind another moves on at its velocity
-// and is found where it comes out.
+// seen, an object that passes behind another moves on at its velocity
+// and is found where it comes out, and of the fits of lost objects to a
+// detection the best that the frame shows is taken.
 // The two longest (resting, re-identification) run in float only
 // (SystemRuleConfigs, support/configs.hpp).
 #include <algorithm>
@@ -499,6 +500,38 @@ TEMPLATE_LIST_TEST_CASE("A model fits a frame only where the frame does not see 
   };
   CHECK(consistent_with_frame(ball, T_volume_camera, seen, disc(11), camera));
   CHECK_FALSE(consistent_with_frame(ball, T_volume_camera, seen, disc(20), camera));
+}
+
+TEST_CASE("The best fit to a detection that the frame shows is taken", "[slam]") {
+  using Fit = detail::reidentification::CandidateFit<double>;
+  using detail::reidentification::best_shown_fit;
+  const SE3<double> id = SE3<double>::identity(), moved = SE3<double>::translation(vec3(0.1, 0.0, 0.0));
+  // Candidate 1 (a false object of the class) fits the points best, but the
+  // frame does not show it there; candidate 0 (the object) is shown.
+  const std::vector<Fit> fits{{0, 0.806, moved}, {1, 0.858, id}, {2, 0.4, id}};
+  std::vector<int> asked;
+  const auto fit = best_shown_fit(fits, 0.5, [&](const Fit& f) {
+    asked.push_back(f.candidate);
+    return f.candidate != 1;
+  });
+  REQUIRE(fit);
+  CHECK(fit->candidate == 0);
+  CHECK(fit->inliers == 0.806);
+  CHECK(fit->T_volume_camera.translation().x() == 0.1);
+  CHECK(asked == std::vector<int>{1, 0});  // most points first
+  // None shown: nothing, and a fit under the minimum is never asked about.
+  asked.clear();
+  CHECK_FALSE(best_shown_fit(fits, 0.5, [&](const Fit& f) {
+    asked.push_back(f.candidate);
+    return false;
+  }));
+  CHECK(asked == std::vector<int>{1, 0});
+  const auto always = [](const Fit&) { return true; };
+  CHECK_FALSE(best_shown_fit(fits, 0.9, always));
+  // Ties in list order; a fit with no points on the surface never counts.
+  CHECK(best_shown_fit(std::vector<Fit>{{3, 0.7, id}, {4, 0.7, moved}}, 0.5, always)->candidate == 3);
+  CHECK_FALSE(best_shown_fit(std::vector<Fit>{{5, 0.0, id}}, 0.0, always));
+  CHECK_FALSE(best_shown_fit(std::vector<Fit>{}, 0.5, always));
 }
 
 TEMPLATE_LIST_TEST_CASE("A lost object is fitted first from its last pose, and only as far as it can have moved",

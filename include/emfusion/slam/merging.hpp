@@ -128,7 +128,8 @@ ObjectModel<S, B>* live_object(Map<S, B>& map, int id) {
 ///    same space);
 /// each is aligned to d's points (B's pixels included) as re-identification
 /// aligns (fit_to_target), and the best with at least merge_min_inliers of
-/// the points on its surface is merged with B: the older of the two ids
+/// the points on its surface that the frame shows there (best_shown_fit)
+/// is merged with B: the older of the two ids
 /// goes on at the pose the detection gives it, with the other's model fused
 /// into its own (fuse_object_models); the other leaves the map (its record:
 /// deleted, DeletionReason::merged) and its poses after the survivor's last
@@ -180,22 +181,22 @@ std::vector<ObjectMerge> merge_objects(Map<S, B>& map, const Frame<S, B>& frame,
     const auto target =
         detail::reidentification::detection_target(frame, det, int(d), seg_without_b, *points, camera, params);
     if (!target) continue;
-    int best = -1;
-    double best_inliers = 0;
-    SE3<S> best_T;
+    std::vector<detail::reidentification::CandidateFit<S>> fits;
     for (std::size_t c = 0; c < candidates.size(); ++c) {
       const auto [inliers, T] = detail::reidentification::fit_to_target(*candidates[c].object, *target, frame,
                                                                          map.T_world_camera, params, norm, solver);
-      if (inliers > best_inliers) best = int(c), best_inliers = inliers, best_T = T;
+      fits.push_back({int(c), inliers, T});
     }
-    if (best < 0 || best_inliers < params.merge_min_inliers ||
-        !detail::reidentification::consistent_with_frame(*candidates[std::size_t(best)].object, best_T, frame,
-                                                       target->mask, camera))
-      continue;
-    ObjectModel<S, B>& a = *candidates[std::size_t(best)].object;
-    const int lost_index = candidates[std::size_t(best)].lost;
+    const auto fit = detail::reidentification::best_shown_fit(
+        std::move(fits), params.merge_min_inliers, [&](const detail::reidentification::CandidateFit<S>& f) {
+          return detail::reidentification::consistent_with_frame(*candidates[std::size_t(f.candidate)].object,
+                                                                  f.T_volume_camera, frame, target->mask, camera);
+        });
+    if (!fit) continue;
+    ObjectModel<S, B>& a = *candidates[std::size_t(fit->candidate)].object;
+    const int lost_index = candidates[std::size_t(fit->candidate)].lost;
     // A's pose where the detection puts it; the survivor is the older id.
-    a.set_pose(map.T_world_camera * best_T.inverse() * a.T_object_volume().inverse());
+    a.set_pose(map.T_world_camera * fit->T_volume_camera.inverse() * a.T_object_volume().inverse());
     const bool a_survives = a.id() < b->id();
     ObjectModel<S, B>& survivor = a_survives ? a : *b;
     const ObjectModel<S, B>& other = a_survives ? *b : a;
