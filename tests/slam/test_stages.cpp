@@ -775,7 +775,7 @@ TEMPLATE_LIST_TEST_CASE("Every object's pixel counts in one pass equal each obje
         CHECK(all[std::size_t(k)].associated == one.associated);
         CHECK(one.associated >= one.associated_inner);
         if (border == 0) CHECK(one.associated == one.associated_inner);
-        CHECK(all[std::size_t(k)].association_sum == Approx(one.association_sum).epsilon(1e-12));
+        CHECK(all[std::size_t(k)].association_sum == emfusion::test::Approx(one.association_sum).epsilon(1e-12));
         CHECK(one.rendered > 0);
         CHECK((k == objects - 1) == (one.associated_inner == 0));
       }
