@@ -706,6 +706,17 @@ TEST_CASE("Hostile frames: the guards' parameters are validated", "[slam]") {
         std::string::npos);
   CHECK(error([](SystemParams<float>& p) { p.refind_moving_seconds = INFINITY; }).find("refind_moving_seconds") !=
         std::string::npos);
+  // Looking for lost objects in what no model explains.
+  CHECK(error([](SystemParams<float>& p) { p.refind_unexplained_every = 0; }).empty());  // off
+  CHECK(error([](SystemParams<float>& p) { p.refind_unexplained_every = -1; }).find("refind_unexplained_every") !=
+        std::string::npos);
+  const double bad_sigmas[] = {0.0, -2.0, double(NAN), double(INFINITY)};
+  for (const double bad : bad_sigmas)
+    CHECK(error([bad](SystemParams<float>& p) { p.refind_unexplained_sigmas = bad; }).find("refind_unexplained_sigmas") !=
+          std::string::npos);
+  for (const double bad : bad_sigmas)
+    CHECK(error([bad](SystemParams<float>& p) { p.refind_unexplained_speed = bad; }).find("refind_unexplained_speed") !=
+          std::string::npos);
   CHECK(error([](SystemParams<float>& p) { p.reidentify_mask_fraction = 1; }).empty());  // the creation rule
   const double bad_fractions[] = {0.0, 1.5, double(NAN)};
   for (const double bad : bad_fractions)

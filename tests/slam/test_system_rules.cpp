@@ -7,7 +7,8 @@
 // detected again (with lost_object_frames = 0: gone for good; fitted first
 // from the pose they were lost in and only as far as they can have moved;
 // with refind_in_view found again without a detection where the frame shows
-// them where they were lost), a new object at the border survives until
+// them where they were lost; found in what no model explains when it comes
+// back elsewhere), a new object at the border survives until
 // seen, an object that passes behind another moves on at its velocity
 // and is found where it comes out, and of the fits of lost objects to a
 // detection the best that the frame shows is taken.
@@ -534,6 +535,20 @@ TEST_CASE("The best fit to a detection that the frame shows is taken", "[slam]")
   CHECK_FALSE(best_shown_fit(std::vector<Fit>{}, 0.5, always));
 }
 
+TEST_CASE("Without a class, a group two objects fit about as well is left alone", "[slam]") {
+  using Fit = detail::reidentification::CandidateFit<double>;
+  using detail::unexplained::unambiguous;
+  const SE3<double> id = SE3<double>::identity();
+  // Two fits above the minimum within the margin: either object could be there.
+  CHECK_FALSE(unambiguous(std::vector<Fit>{{0, 0.95, id}, {1, 0.93, id}}, 0.6, 0.05));
+  CHECK_FALSE(unambiguous(std::vector<Fit>{{0, 0.93, id}, {1, 0.4, id}, {2, 0.95, id}}, 0.6, 0.05));
+  // One clearly better, or only one above the minimum, or none.
+  CHECK(unambiguous(std::vector<Fit>{{0, 0.95, id}, {1, 0.85, id}}, 0.6, 0.05));
+  CHECK(unambiguous(std::vector<Fit>{{0, 0.95, id}, {1, 0.58, id}}, 0.6, 0.05));
+  CHECK(unambiguous(std::vector<Fit>{{0, 0.5, id}, {1, 0.5, id}}, 0.6, 0.05));
+  CHECK(unambiguous(std::vector<Fit>{}, 0.6, 0.05));
+}
+
 TEMPLATE_LIST_TEST_CASE("A lost object is fitted first from its last pose, and only as far as it can have moved",
                         "[slam]", emfusion::test::SystemRuleConfigs) {
   using S = typename TestType::Scalar;
@@ -758,6 +773,7 @@ TEMPLATE_LIST_TEST_CASE("A lost object the frame shows where it was lost comes b
   SystemParams<S> params = small_params<S>();
   params.min_association = 0;  // this test is about the visibility rule (as the re-identification test)
   params.refind_in_view = true;
+  params.refind_unexplained_every = 0;  // the next test's rule
   FirstFrame<S, B> first("cup", 1, params);
   System<S, B>& sys = first.system;
   REQUIRE(sys.objects().size() == 1);
@@ -792,6 +808,62 @@ TEMPLATE_LIST_TEST_CASE("A lost object the frame shows where it was lost comes b
   }
   SECTION("the box moved 0.3 m while out of view: it stays lost until a detection finds it") {
     CHECK(pan_back(BoxScene<S>(vec3(S(0.3), S(0), S(1.2)))) < 0);
+    CHECK(sys.objects().empty());
+    CHECK(sys.map().lost.size() == 1);
+  }
+}
+
+TEMPLATE_LIST_TEST_CASE("A lost object back in view elsewhere is found in what no model explains", "[slam]",
+                        emfusion::test::SystemRuleConfigs) {
+  using S = typename TestType::Scalar;
+  using B = typename TestType::Backend;
+  // On, off, and on for an object detected on one detector frame only
+  // (a false positive is seldom seen twice: such an object is not looked for).
+  const int mode = GENERATE(0, 1, 2);
+  const bool unexplained = mode == 0;
+  SystemParams<S> params = small_params<S>();
+  params.min_association = 0;  // as the test above
+  params.refind_unexplained_every = mode == 1 ? 0 : 1;
+  FirstFrame<S, B> first("cup", 1, params);
+  System<S, B>& sys = first.system;
+  REQUIRE(sys.objects().size() == 1);
+  if (mode != 2) {  // detected again on the next frame
+    const Detections again = detections_of(first.labels, 1, "cup", 0.5 / 30.0);
+    sys.process(first.depth, 0.5 / 30.0, &again);
+    REQUIRE(sys.objects().size() == 1);
+    REQUIRE(sys.objects()[0]->existence_count() == 2);
+  }
+  const SE3<S> start = sys.objects()[0]->pose();
+  const int k = pan_until_deleted(sys, first.scene);
+  REQUIRE(k > 0);
+  REQUIRE(sys.map().lost.size() == 1);
+  // The box moved 0.3 m to the left while out of view (drawn where it was
+  // lost, its model shows the wall: refind_in_view does not find it); the
+  // camera pans back, without a detection, and sees it again about 20
+  // frames later (0.67 s: it can have gone 0.67 m at refind_unexplained_speed).
+  const BoxScene<S> moved(vec3(S(-0.3), S(0), S(1.2)));
+  int found_at = -1;
+  for (int j = k - 1, frame = k; j >= 0; --j) {
+    const SE3<S> pose = SE3<S>(so3_exp(vec3(S(0), S(0.02) * S(j), S(0))), Vec3<S>::zero());
+    const FrameResult r = sys.process(moved.template depth<B>(pose), ++frame / 30.0);
+    CHECK(r.created.empty());
+    if (!r.reidentified.empty() && found_at < 0) {
+      CHECK(r.reidentified == std::vector<int>{1});
+      found_at = j;
+    }
+  }
+  INFO("lost at pan step " << k << ", found at step " << found_at);
+  if (unexplained) {
+    CHECK(found_at > 0);
+    REQUIRE(sys.objects().size() == 1);
+    CHECK(sys.objects()[0]->id() == 1);
+    CHECK(sys.map().lost.empty());
+    // Tracked to where the box is now (0.77 cm off in float on the CPU; it
+    // comes back once wholly in view, not while the border cuts it).
+    const Vec3<S> shift = (sys.camera_pose().inverse() * sys.objects()[0]->pose()).translation() - start.translation();
+    CHECK(double(norm(shift - vec3(S(-0.3), S(0), S(0)))) < 0.015);
+  } else {
+    CHECK(found_at < 0);
     CHECK(sys.objects().empty());
     CHECK(sys.map().lost.size() == 1);
   }
@@ -838,7 +910,12 @@ TEMPLATE_LIST_TEST_CASE("An object that passes behind another moves on at its ve
     Outcome out;
     const int last = 64;
     for (int k = 1; k <= last; ++k) {
-      const FrameResult r = sys.process(depth_at(k, nullptr), k / 30.0);
+      // Detected on the first two frames (refind_unexplained looks only for
+      // objects seen by the detector twice).
+      Image<int, Host> seen;
+      const Image<S, B> depth = depth_at(k, k == 1 ? &seen : nullptr);
+      const Detections again = k == 1 ? detections_of(seen, 1, "cup", k / 30.0) : Detections{};
+      const FrameResult r = sys.process(depth, k / 30.0, k == 1 ? &again : nullptr);
       out.created += int(r.created.size());
       out.frames_lost += sys.objects().empty() ? 1 : 0;
     }
@@ -906,9 +983,20 @@ TEMPLATE_LIST_TEST_CASE("An object that passes behind another moves on at its ve
     CHECK(unbounded.drift > 0.01);
     CHECK(bounded.error < unbounded.error);
   }
-  SECTION("without either: lost behind the panel and not found where it went") {
+  SECTION("without the hold and the carried pose, found where it went in what no model explains") {
     params.hold_occluded_objects = false;
     params.refind_moving_seconds = S(0);
+    REQUIRE(params.refind_unexplained_every > 0);
+    const Outcome out = run(params);
+    INFO("frames without the object: " << out.frames_lost << ", error " << out.error << " m");
+    CHECK(out.created == 0);
+    CHECK(out.back);
+    CHECK(out.error < 0.015);
+  }
+  SECTION("without any of the three: lost behind the panel and not found where it went") {
+    params.hold_occluded_objects = false;
+    params.refind_moving_seconds = S(0);
+    params.refind_unexplained_every = 0;
     const Outcome out = run(params);
     INFO("frames without the object: " << out.frames_lost << ", error " << out.error << " m");
     CHECK_FALSE((out.back && out.error < 0.015));

@@ -204,6 +204,18 @@ struct SystemParams {
   /// 0: only where it was lost): one that passed behind another object
   /// comes out on the other side.
   S refind_moving_seconds = S(1);
+  /// Lost objects are also looked for, on every this many frames (0: off),
+  /// in what no model explains: groups of measured points on no live object
+  /// and off the background's surface, each aligned to every lost object as
+  /// a detection would be (refind_unexplained, unexplained.hpp). An object
+  /// that comes back into view anywhere is tracked again without waiting for
+  /// the detector.
+  int refind_unexplained_every = 1;
+  /// ... where "off the surface" is further than this many likelihood.sigma.
+  double refind_unexplained_sigmas = 2.0;
+  /// ... and an object is looked for only as far from where it was last
+  /// tracked as it can have gone at this speed (m/s).
+  double refind_unexplained_speed = 1.0;
 
   // Rendering (sec. 3.5).
   S min_foreground = S(0.5);     ///< object voxels render where p_fg exceeds this
@@ -291,6 +303,11 @@ struct SystemParams {
     detail::require(reidentify_min_inliers > 0 && reidentify_min_inliers <= 1, w,
                     "reidentify_min_inliers must be in (0, 1]");
     detail::require(relocalize_below >= 0 && relocalize_below <= 1, w, "relocalize_below must be in [0, 1]");
+    detail::require(refind_unexplained_every >= 0, w, "refind_unexplained_every must not be negative");
+    detail::require(refind_unexplained_sigmas > 0 && std::isfinite(refind_unexplained_sigmas), w,
+                    "refind_unexplained_sigmas must be positive and finite");
+    detail::require(refind_unexplained_speed > 0 && std::isfinite(refind_unexplained_speed), w,
+                    "refind_unexplained_speed must be positive and finite");
     detail::require(refind_moving_seconds >= 0 && std::isfinite(double(refind_moving_seconds)), w,
                     "refind_moving_seconds must be finite and not negative");
     detail::require(hidden_moving_seconds >= 0 && std::isfinite(double(hidden_moving_seconds)), w,

@@ -14,6 +14,9 @@
 //                                                        (lifecycle.hpp)
 //   8. on detector frames: merge two models found to be one object
 //                                                        (merging.hpp)
+//   9. lost objects found again without a detection: where the frame shows
+//      them where they were lost (reidentification.hpp), or in what no
+//      model explains, between detector frames             (unexplained.hpp)
 //
 // The state is a Map (map.hpp) and the frame's images a Frame (frame.hpp);
 // a user's own loop calls the same stages on its own Map and Frame
@@ -46,6 +49,7 @@
 #include "emfusion/slam/preprocessing.hpp"
 #include "emfusion/slam/rendering.hpp"
 #include "emfusion/slam/tracking.hpp"
+#include "emfusion/slam/unexplained.hpp"
 #include "emfusion/solve/solvers.hpp"
 
 namespace emfusion {
@@ -171,6 +175,9 @@ class System {
     // Lost objects that the frame shows where they were lost come back
     // (refind_in_view).
     refind_in_view(map_, frame_, camera_, params_, result);
+    // ... and those back in view elsewhere, in what no model explains
+    // (refind_unexplained_every; 0 turns it off).
+    refind_unexplained(map_, frame_, camera_, params_, parts_.object_norm, parts_.solver, result);
     // Deleted and resized (detector frames) object volumes are freed memory
     // the C library may keep; on the CPU that is resident memory.
     if constexpr (!B::is_device)

@@ -1,0 +1,255 @@
+// Lost objects found again in what no model explains (an extension of the
+// paper; docs/system.md, "Lost objects"): between detector frames an object
+// that comes back into view, anywhere, is a patch of measured points that
+// no live object is drawn on and that lies off the background's surface.
+// Each such patch (a connected group of pixels, depth-continuous) is treated
+// as a detection of unknown class: every lost object is aligned to it as
+// re-identification aligns one to a detection (fit_to_target), and the best
+// fit the frame shows (best_shown_fit) brings its object back.
+#pragma once
+
+#include <algorithm>
+#include <cmath>
+#include <cstddef>
+#include <cstdint>
+#include <optional>
+#include <type_traits>
+#include <utility>
+#include <vector>
+
+#include <thrust/functional.h>
+
+#include "emfusion/core/image.hpp"
+#include "emfusion/core/parallel.hpp"
+#include "emfusion/robust/norms.hpp"
+#include "emfusion/slam/frame.hpp"
+#include "emfusion/slam/frame_result.hpp"
+#include "emfusion/slam/map.hpp"
+#include "emfusion/slam/params.hpp"
+#include "emfusion/slam/reidentification.hpp"
+
+namespace emfusion {
+
+namespace detail::unexplained {
+
+/// 1 where pixel i (inside the visibility border) shows a measured point
+/// that no live object is drawn on (`segmentation` 0) or claims in the
+/// E-step (the background's association is 1 where the point is in no
+/// live object's volume: the parts of a live object its model has not
+/// seen yet are not unexplained) and that lies further
+/// than `tolerance` from the background's surface where the background has
+/// observed that place (a place seen for the first time is new background,
+/// not an object).
+template <class S, class View>
+struct MarkUnexplained {
+  ImageView<const Vec3<S>> points;
+  ImageView<const int> segmentation;
+  ImageView<const S> background_association;  // the E-step's q for the background
+  View background;
+  SE3<S> T_volume_camera;
+  int border;
+  S tolerance;
+  std::uint8_t* out;
+  EMF_HD void operator()(int i) const {
+    std::uint8_t mark = 0;
+    const Vec3<S>& p = points[i];
+    S sdf;
+    if (points.inside_border(i, border) && segmentation[i] <= 0 && p.z() > S(0) &&
+        background_association[i] >= S(0.99) && background.sample_observed(T_volume_camera * p, sdf))
+      mark = std::fabs(sdf) > tolerance ? 1 : 0;
+    out[i] = mark;
+  }
+};
+
+/// Detector frames an object must have been detected in to be looked for
+/// without a detection: a false positive is seldom seen twice, and a model
+/// of nothing fits some patch of what no model explains.
+inline constexpr int min_detections = 2;
+
+/// 1 for a marked pixel (the count of MarkUnexplained's marks).
+struct CountMarked {
+  ImageView<const std::uint8_t> marked;
+  EMF_HD int operator()(int i) const { return int(marked[i]); }
+};
+
+/// The connected groups of marked pixels of a width x height image (four
+/// neighbours, joined where their depths differ by at most `depth_gap`),
+/// each as its pixel indices; those of fewer than `min_pixels` are left out.
+template <class S>
+std::vector<std::vector<int>> groups_of(const std::vector<std::uint8_t>& marked, const std::vector<Vec3<S>>& points,
+                                        int width, int height, S depth_gap, int min_pixels) {
+  std::vector<std::vector<int>> out;
+  std::vector<std::uint8_t> seen(marked.size(), 0);
+  std::vector<int> stack;
+  for (int start = 0; start < width * height; ++start) {
+    if (!marked[std::size_t(start)] || seen[std::size_t(start)]) continue;
+    std::vector<int> group;
+    stack.assign(1, start);
+    seen[std::size_t(start)] = 1;
+    while (!stack.empty()) {
+      const int i = stack.back();
+      stack.pop_back();
+      group.push_back(i);
+      const int u = i % width, v = i / width;
+      const int next[4] = {u > 0 ? i - 1 : -1, u + 1 < width ? i + 1 : -1, v > 0 ? i - width : -1,
+                           v + 1 < height ? i + width : -1};
+      for (int j : next)
+        if (j >= 0 && marked[std::size_t(j)] && !seen[std::size_t(j)] &&
+            std::fabs(points[std::size_t(j)].z() - points[std::size_t(i)].z()) <= depth_gap) {
+          seen[std::size_t(j)] = 1;
+          stack.push_back(j);
+        }
+    }
+    if (int(group.size()) >= min_pixels) out.push_back(std::move(group));
+  }
+  return out;
+}
+
+/// False when two of the fits put at least `min_inliers` of the points on
+/// their surfaces and the second comes within `margin` of the best: without
+/// a class, such a group could be either object (a mug and a round box seen
+/// from one side fit the same few points; on c214 of the generalisation
+/// benchmark the two swapped places).
+template <class S>
+bool unambiguous(const std::vector<reidentification::CandidateFit<S>>& fits, double min_inliers, double margin) {
+  double best = 0, second = 0;
+  for (const auto& f : fits)
+    if (f.inliers >= min_inliers) {
+      second = std::max(second, std::min(best, f.inliers));
+      best = std::max(best, f.inliers);
+    }
+  return !(second >= min_inliers && best - second < margin);
+}
+
+/// True when at least 1 % of a group's pixels lie on the visibility
+/// border's edge (the outermost pixels MarkUnexplained marks): the image
+/// cuts the object it shows, and the part in view fits a lost object at a
+/// wrong pose as well as at the right one (on c215 a car coming back across
+/// the border was placed 24 cm off). It is looked for once wholly in view.
+inline bool cut_by_border(const std::vector<int>& group, int width, int height, int border) {
+  std::size_t edge = 0;
+  for (int i : group) {
+    const int u = i % width, v = i / width;
+    edge += u == border || v == border || u == width - 1 - border || v == height - 1 - border;
+  }
+  return 100 * edge >= group.size();
+}
+
+/// A group of pixels as re-identification's target: its points, their
+/// centroid and viewing ray, and the group as a weight image on the backend.
+template <class S, Backend B>
+reidentification::DetectionTarget<S, B> target_of(const std::vector<int>& group, const std::vector<Vec3<S>>& points,
+                                                  int width, int height, const B& backend) {
+  reidentification::DetectionTarget<S, B> t;
+  t.points = group.size();
+  t.centroid = Vec3<S>::zero();
+  std::vector<S> mask(std::size_t(width) * std::size_t(height), S(0));
+  for (int i : group) {
+    t.centroid = t.centroid + points[std::size_t(i)];
+    mask[std::size_t(i)] = S(1);
+  }
+  t.centroid = t.centroid / S(group.size());
+  t.ray = normalized(t.centroid);
+  t.mask = Image<S, Host>::from_host(width, height, mask).template to<B>(backend);
+  return t;
+}
+
+}  // namespace detail::unexplained
+
+/// Stage 8c, at the end of a frame after refind_in_view
+/// (params.refind_unexplained_every > 0: on every that many frames): lost
+/// objects (not lost this frame, not ignored) found again in what no model
+/// explains. The frame's unexplained pixels (MarkUnexplained: off the
+/// background's surface by more than refind_unexplained_sigmas times
+/// likelihood.sigma, on no live object, inside the visibility border) are
+/// counted on the backend; only where there are at least keep_mask_pixels
+/// of them (what keeps a live object visible) are they and the points read
+/// on the host and grouped (depth-continuous within object_depth_gap). Each
+/// group of at least keep_mask_pixels and at most a quarter of the image,
+/// not cut by the image border (cut_by_border), is a target for every lost
+/// object, of any class, detected on at least two
+/// detector frames (min_detections): aligned to it as re-identification
+/// aligns (fit_to_target), a fit that moves the object's box centre further
+/// from where it was last tracked than refind_unexplained_speed times the
+/// time since is dropped; when two fits put reidentify_min_inliers of the
+/// points on their surfaces within reidentify_keep_margin of each other the
+/// group is left alone (unambiguous); otherwise the best fit with at least
+/// reidentify_min_inliers that the frame shows there (best_shown_fit,
+/// consistent_with_frame) brings its object back at the solved pose,
+/// tracked from the next frame. Not on detector frames, nor after another
+/// object came back this frame (the segmentation and the E-step do not show
+/// those). Its id is added to result.reidentified; returns how many came
+/// back.
+template <class S, Backend B, class Norm, class Solver>
+  requires RobustNorm<Norm, S> && PoseSolver<Solver, S>
+int refind_unexplained(Map<S, B>& map, const Frame<S, B>& frame, const PinholeCamera<S>& camera,
+                       const SystemParams<S>& params, const Norm& norm, const Solver& solver, FrameResult& result) {
+  if (params.refind_unexplained_every <= 0 || map.frames % params.refind_unexplained_every != 0) return 0;
+  // The segmentation and the E-step do not show objects created or brought
+  // back this frame: their pixels would be unexplained.
+  if (result.detector_frame || !result.reidentified.empty()) return 0;
+  const auto is_candidate = [&](const LostObject<S, B>& l) {
+    return l.lost_at < map.frames && !params.ignores(l.object->class_name()) &&
+           l.object->existence_count() >= detail::unexplained::min_detections;
+  };
+  bool any = false;
+  for (const LostObject<S, B>& l : map.lost) any = any || is_candidate(l);
+  if (!any || int(map.objects.size()) >= params.max_objects || frame.associations.model_count() < 1) return 0;
+  const int width = camera.width, height = camera.height;
+  // As many as keep a live object: one found on fewer would be lost again.
+  const int min_points = params.keep_mask_pixels_for(width, height);
+  const B& backend = frame.points.backend();
+  Image<std::uint8_t, B> marked(width, height, std::uint8_t(0), backend);
+  map.background.visit([&](const auto& volume) {
+    using View = std::decay_t<decltype(volume.view())>;
+    for_each_index(backend, frame.points.size(),
+                   detail::unexplained::MarkUnexplained<S, View>{
+                       frame.points.view(), frame.segmentation.view(),
+                       std::as_const(frame.associations.image(0)).view(), volume.view(),
+                       volume.pose().inverse() * map.T_world_camera, params.visibility_border_for(width),
+                       S(params.refind_unexplained_sigmas) * params.likelihood.sigma, marked.view().data});
+  });
+  const int count = transform_reduce_index(backend, marked.size(), detail::unexplained::CountMarked{std::as_const(marked).view()},
+                                           0, thrust::plus<int>());
+  if (count < min_points) return 0;
+  const std::vector<Vec3<S>> points = frame.points.to_host();
+  const double now = map.camera_trajectory.empty() ? 0.0 : map.camera_trajectory.back().timestamp;
+  const int border = params.visibility_border_for(width);
+  const std::vector<std::vector<int>> groups = detail::unexplained::groups_of(
+      marked.to_host(), points, width, height, params.object_depth_gap, min_points);
+  int found = 0;
+  for (const std::vector<int>& group : groups) {
+    if (4 * group.size() > std::size_t(width) * std::size_t(height) || int(map.objects.size()) >= params.max_objects ||
+        detail::unexplained::cut_by_border(group, width, height, border))
+      continue;
+    const auto target = detail::unexplained::target_of<S, B>(group, points, width, height, backend);
+    std::vector<detail::reidentification::CandidateFit<S>> fits;
+    for (std::size_t k = 0; k < map.lost.size(); ++k) {
+      if (!is_candidate(map.lost[k])) continue;
+      const ObjectModel<S, B>& o = *map.lost[k].object;
+      const auto [inliers, T] = detail::reidentification::fit_to_target(o, target, frame, map.T_world_camera, params,
+                                                                         norm, solver,
+                                                                         std::max(map.frames - map.lost[k].lost_at, 1));
+      // Its box centre can have gone refind_unexplained_speed times the
+      // time since it was last tracked.
+      const Vec3<S> centre = S(0.5) * o.volume().view().extent();
+      const double moved = double(emfusion::norm((map.T_world_camera * T.inverse()) * centre - o.volume().pose() * centre));
+      const double seconds = std::max(now - map.record_of(o.id()).last_timestamp, 0.0);
+      if (moved <= double(params.refind_unexplained_speed) * seconds) fits.push_back({int(k), inliers, T});
+    }
+    if (!detail::unexplained::unambiguous(fits, params.reidentify_min_inliers, params.reidentify_keep_margin)) continue;
+    const auto fit = detail::reidentification::best_shown_fit(
+        std::move(fits), params.reidentify_min_inliers, [&](const detail::reidentification::CandidateFit<S>& f) {
+          return detail::reidentification::consistent_with_frame(*map.lost[std::size_t(f.candidate)].object,
+                                                                  f.T_volume_camera, frame, target.mask, camera);
+        });
+    if (!fit) continue;
+    ObjectModel<S, B>& obj = map.bring_back(std::size_t(fit->candidate));
+    obj.set_pose(map.T_world_camera * fit->T_volume_camera.inverse() * obj.T_object_volume().inverse());
+    result.reidentified.push_back(obj.id());
+    ++found;
+  }
+  return found;
+}
+
+}  // namespace emfusion
