@@ -315,6 +315,24 @@ int pan_until_deleted(System<S, B>& sys, const BoxScene<S>& scene) {
   return 0;
 }
 
+/// Pans back from frame `k` to the start over `now` (the box where it is
+/// now), without a detection; returns the pan step at which object 1 came
+/// back (-1: never), checking that nothing else was created or came back.
+template <class S, class B>
+int pan_back_until_found(System<S, B>& sys, const BoxScene<S>& now, int k) {
+  int found_at = -1;
+  for (int j = k - 1, frame = k; j >= 0; --j) {
+    const SE3<S> pose = SE3<S>(so3_exp(vec3(S(0), S(0.02) * S(j), S(0))), Vec3<S>::zero());
+    const FrameResult r = sys.process(now.template depth<B>(pose), ++frame / 30.0);
+    CHECK(r.created.empty());
+    if (!r.reidentified.empty() && found_at < 0) {
+      CHECK(r.reidentified == std::vector<int>{1});
+      found_at = j;
+    }
+  }
+  return found_at;
+}
+
 /// Pans back from frame `k` to the start, then shows `scene` (the box where
 /// it is now) with a detection of it as `class_name`: of all of it, or of
 /// about `mask_pixels` of its pixels spread over it (every n-th in row
@@ -782,19 +800,7 @@ TEMPLATE_LIST_TEST_CASE("A lost object the frame shows where it was lost comes b
   REQUIRE(k > 0);
   REQUIRE(sys.map().lost.size() == 1);
   // The way back, without a detection: where the box is now decides.
-  const auto pan_back = [&](const BoxScene<S>& now) {
-    int found_at = -1;
-    for (int j = k - 1, frame = k; j >= 0; --j) {
-      const SE3<S> pose = SE3<S>(so3_exp(vec3(S(0), S(0.02) * S(j), S(0))), Vec3<S>::zero());
-      const FrameResult r = sys.process(now.template depth<B>(pose), ++frame / 30.0);
-      CHECK(r.created.empty());
-      if (!r.reidentified.empty() && found_at < 0) {
-        CHECK(r.reidentified == std::vector<int>{1});
-        found_at = j;
-      }
-    }
-    return found_at;
-  };
+  const auto pan_back = [&](const BoxScene<S>& now) { return pan_back_until_found(sys, now, k); };
   SECTION("the box stood still: it is found on the way back and tracked to where it is") {
     const int found_at = pan_back(first.scene);
     INFO("lost at pan step " << k << ", found at step " << found_at);
@@ -842,16 +848,7 @@ TEMPLATE_LIST_TEST_CASE("A lost object back in view elsewhere is found in what n
   // camera pans back, without a detection, and sees it again about 20
   // frames later (0.67 s: it can have gone 0.67 m at refind_unexplained_speed).
   const BoxScene<S> moved(vec3(S(-0.3), S(0), S(1.2)));
-  int found_at = -1;
-  for (int j = k - 1, frame = k; j >= 0; --j) {
-    const SE3<S> pose = SE3<S>(so3_exp(vec3(S(0), S(0.02) * S(j), S(0))), Vec3<S>::zero());
-    const FrameResult r = sys.process(moved.template depth<B>(pose), ++frame / 30.0);
-    CHECK(r.created.empty());
-    if (!r.reidentified.empty() && found_at < 0) {
-      CHECK(r.reidentified == std::vector<int>{1});
-      found_at = j;
-    }
-  }
+  const int found_at = pan_back_until_found(sys, moved, k);
   INFO("lost at pan step " << k << ", found at step " << found_at);
   if (unexplained) {
     CHECK(found_at > 0);
