@@ -188,15 +188,14 @@ std::vector<ObjectMerge> merge_objects(Map<S, B>& map, const Frame<S, B>& frame,
       fits.push_back({int(c), inliers, T});
     }
     const auto fit = detail::reidentification::best_shown_fit(
-        std::move(fits), params.merge_min_inliers, [&](const detail::reidentification::CandidateFit<S>& f) {
-          return detail::reidentification::consistent_with_frame(*candidates[std::size_t(f.candidate)].object,
-                                                                  f.T_volume_camera, frame, target->mask, camera);
-        });
+        std::move(fits), params.merge_min_inliers,
+        [&](int c) -> const ObjectModel<S, B>& { return *candidates[std::size_t(c)].object; }, frame, target->mask,
+        camera);
     if (!fit) continue;
     ObjectModel<S, B>& a = *candidates[std::size_t(fit->candidate)].object;
     const int lost_index = candidates[std::size_t(fit->candidate)].lost;
     // A's pose where the detection puts it; the survivor is the older id.
-    a.set_pose(map.T_world_camera * fit->T_volume_camera.inverse() * a.T_object_volume().inverse());
+    detail::reidentification::move_to_fit(a, map.T_world_camera, *fit);
     const bool a_survives = a.id() < b->id();
     ObjectModel<S, B>& survivor = a_survives ? a : *b;
     const ObjectModel<S, B>& other = a_survives ? *b : a;

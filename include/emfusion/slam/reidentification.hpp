@@ -265,6 +265,23 @@ std::optional<CandidateFit<S>> best_shown_fit(std::vector<CandidateFit<S>> fits,
   return std::nullopt;
 }
 
+/// best_shown_fit with consistent_with_frame as the test: `object_of(i)` is
+/// candidate i's model, `mask` the detection's pixels.
+template <class S, Backend B, class ObjectOf>
+std::optional<CandidateFit<S>> best_shown_fit(std::vector<CandidateFit<S>> fits, double min_inliers,
+                                              ObjectOf object_of, const Frame<S, B>& frame, const Image<S, B>& mask,
+                                              const PinholeCamera<S>& camera) {
+  return best_shown_fit(std::move(fits), min_inliers, [&](const CandidateFit<S>& f) {
+    return consistent_with_frame(object_of(f.candidate), f.T_volume_camera, frame, mask, camera);
+  });
+}
+
+/// Object `o` moved to where `fit` puts it (T_world_camera: this frame's camera).
+template <class S, Backend B>
+void move_to_fit(ObjectModel<S, B>& o, const SE3<S>& T_world_camera, const CandidateFit<S>& fit) {
+  o.set_pose(T_world_camera * fit.T_volume_camera.inverse() * o.T_object_volume().inverse());
+}
+
 /// The mean association of Map::objects[k] over the pixels it is drawn on
 /// (`seg` on the host), from the frame's association images; 1 when they
 /// do not cover it (the E-step did not run) or it is drawn nowhere.
@@ -312,13 +329,11 @@ std::optional<NewObjectWeights<S, B>> reidentify(Map<S, B>& map, const Frame<S, 
     fits.push_back({int(k), inliers, T});
   }
   const auto fit = detail::reidentification::best_shown_fit(
-      std::move(fits), params.reidentify_min_inliers, [&](const detail::reidentification::CandidateFit<S>& f) {
-        return detail::reidentification::consistent_with_frame(*map.lost[std::size_t(f.candidate)].object,
-                                                                f.T_volume_camera, frame, target->mask, camera);
-      });
+      std::move(fits), params.reidentify_min_inliers,
+      [&](int k) -> const ObjectModel<S, B>& { return *map.lost[std::size_t(k)].object; }, frame, target->mask, camera);
   if (!fit) return std::nullopt;
   ObjectModel<S, B>& obj = map.bring_back(std::size_t(fit->candidate));
-  obj.set_pose(map.T_world_camera * fit->T_volume_camera.inverse() * obj.T_object_volume().inverse());
+  detail::reidentification::move_to_fit(obj, map.T_world_camera, *fit);
   obj.add_class_score(inst.class_name, inst.score);
   obj.count_detected();
   return first_view_weights(det, d, seg, outside, camera, frame.points.backend());
@@ -385,13 +400,11 @@ std::vector<int> relocalize_objects(Map<S, B>& map, const Frame<S, B>& frame, co
       fits.push_back({int(k), inliers, T});
     }
     const auto fit = detail::reidentification::best_shown_fit(
-        std::move(fits), params.reidentify_min_inliers, [&](const detail::reidentification::CandidateFit<S>& f) {
-          return detail::reidentification::consistent_with_frame(*map.objects[std::size_t(f.candidate)],
-                                                                  f.T_volume_camera, frame, target->mask, camera);
-        });
+        std::move(fits), params.reidentify_min_inliers,
+        [&](int k) -> const ObjectModel<S, B>& { return *map.objects[std::size_t(k)]; }, frame, target->mask, camera);
     if (!fit) continue;
     ObjectModel<S, B>& obj = *map.objects[std::size_t(fit->candidate)];
-    obj.set_pose(map.T_world_camera * fit->T_volume_camera.inverse() * obj.T_object_volume().inverse());
+    detail::reidentification::move_to_fit(obj, map.T_world_camera, *fit);
     candidate[std::size_t(fit->candidate)] = false;
     moved.push_back(obj.id());
   }

@@ -29,6 +29,7 @@
 
 #include <algorithm>
 #include <concepts>
+#include <cstdint>
 #include <vector>
 
 #include "emfusion/core/camera.hpp"
@@ -177,7 +178,8 @@ class System {
     refind_in_view(map_, frame_, camera_, params_, result);
     // ... and those back in view elsewhere, in what no model explains
     // (refind_unexplained_every; 0 turns it off).
-    refind_unexplained(map_, frame_, camera_, params_, parts_.object_norm, parts_.solver, result);
+    refind_unexplained(map_, frame_, camera_, params_, parts_.object_norm, parts_.solver, result,
+                       &unexplained_marks_);
     // Deleted and resized (detector frames) object volumes are freed memory
     // the C library may keep; on the CPU that is resident memory.
     if constexpr (!B::is_device)
@@ -286,6 +288,7 @@ class System {
   ObjectIntegrationWorkspace<S, B> object_integration_workspace_;
   ObjectPixelsWorkspace<S, B> object_pixels_workspace_;
   DrawnCoverWorkspace<S, B> drawn_cover_workspace_;
+  Image<std::uint8_t, B> unexplained_marks_;  // refind_unexplained's marks
   SparseIntegrationWorkspace<S, B> sparse_workspace_;
   /// The stage times of the frame being processed: on CUDA events queued at
   /// each stage's end and read once at its finish, so the device is not

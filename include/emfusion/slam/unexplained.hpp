@@ -156,7 +156,7 @@ reidentification::DetectionTarget<S, B> target_of(const std::vector<int>& group,
 
 }  // namespace detail::unexplained
 
-/// Stage 8c, at the end of a frame after refind_in_view
+/// Stage 9, at the end of a frame after refind_in_view
 /// (params.refind_unexplained_every > 0: on every that many frames): lost
 /// objects (not lost this frame, not ignored) found again in what no model
 /// explains. The frame's unexplained pixels (MarkUnexplained: off the
@@ -179,11 +179,12 @@ reidentification::DetectionTarget<S, B> target_of(const std::vector<int>& group,
 /// tracked from the next frame. Not on detector frames, nor after another
 /// object came back this frame (the segmentation and the E-step do not show
 /// those). Its id is added to result.reidentified; returns how many came
-/// back.
+/// back. `marks` (optional) keeps the image of marks between frames.
 template <class S, Backend B, class Norm, class Solver>
   requires RobustNorm<Norm, S> && PoseSolver<Solver, S>
 int refind_unexplained(Map<S, B>& map, const Frame<S, B>& frame, const PinholeCamera<S>& camera,
-                       const SystemParams<S>& params, const Norm& norm, const Solver& solver, FrameResult& result) {
+                       const SystemParams<S>& params, const Norm& norm, const Solver& solver, FrameResult& result,
+                       Image<std::uint8_t, B>* marks = nullptr) {
   if (params.refind_unexplained_every <= 0 || map.frames % params.refind_unexplained_every != 0) return 0;
   // The segmentation and the E-step do not show objects created or brought
   // back this frame: their pixels would be unexplained.
@@ -198,15 +199,19 @@ int refind_unexplained(Map<S, B>& map, const Frame<S, B>& frame, const PinholeCa
   const int width = camera.width, height = camera.height;
   // As many as keep a live object: one found on fewer would be lost again.
   const int min_points = params.keep_mask_pixels_for(width, height);
+  const int border = params.visibility_border_for(width);
   const B& backend = frame.points.backend();
-  Image<std::uint8_t, B> marked(width, height, std::uint8_t(0), backend);
+  Image<std::uint8_t, B> local;
+  Image<std::uint8_t, B>& marked = marks ? *marks : local;
+  // Every pixel is written below: the contents of a kept image do not matter.
+  if (!marked.same_size(width, height)) marked = Image<std::uint8_t, B>(width, height, std::uint8_t(0), backend);
   map.background.visit([&](const auto& volume) {
     using View = std::decay_t<decltype(volume.view())>;
     for_each_index(backend, frame.points.size(),
                    detail::unexplained::MarkUnexplained<S, View>{
                        frame.points.view(), frame.segmentation.view(),
                        std::as_const(frame.associations.image(0)).view(), volume.view(),
-                       volume.pose().inverse() * map.T_world_camera, params.visibility_border_for(width),
+                       volume.pose().inverse() * map.T_world_camera, border,
                        S(params.refind_unexplained_sigmas) * params.likelihood.sigma, marked.view().data});
   });
   const int count = transform_reduce_index(backend, marked.size(), detail::unexplained::CountMarked{std::as_const(marked).view()},
@@ -214,7 +219,6 @@ int refind_unexplained(Map<S, B>& map, const Frame<S, B>& frame, const PinholeCa
   if (count < min_points) return 0;
   const std::vector<Vec3<S>> points = frame.points.to_host();
   const double now = map.camera_trajectory.empty() ? 0.0 : map.camera_trajectory.back().timestamp;
-  const int border = params.visibility_border_for(width);
   const std::vector<std::vector<int>> groups = detail::unexplained::groups_of(
       marked.to_host(), points, width, height, params.object_depth_gap, min_points);
   int found = 0;
@@ -239,13 +243,11 @@ int refind_unexplained(Map<S, B>& map, const Frame<S, B>& frame, const PinholeCa
     }
     if (!detail::unexplained::unambiguous(fits, params.reidentify_min_inliers, params.reidentify_keep_margin)) continue;
     const auto fit = detail::reidentification::best_shown_fit(
-        std::move(fits), params.reidentify_min_inliers, [&](const detail::reidentification::CandidateFit<S>& f) {
-          return detail::reidentification::consistent_with_frame(*map.lost[std::size_t(f.candidate)].object,
-                                                                  f.T_volume_camera, frame, target.mask, camera);
-        });
+        std::move(fits), params.reidentify_min_inliers,
+        [&](int k) -> const ObjectModel<S, B>& { return *map.lost[std::size_t(k)].object; }, frame, target.mask, camera);
     if (!fit) continue;
     ObjectModel<S, B>& obj = map.bring_back(std::size_t(fit->candidate));
-    obj.set_pose(map.T_world_camera * fit->T_volume_camera.inverse() * obj.T_object_volume().inverse());
+    detail::reidentification::move_to_fit(obj, map.T_world_camera, *fit);
     result.reidentified.push_back(obj.id());
     ++found;
   }
