@@ -327,7 +327,7 @@ std::pair<double, double> median_p90(std::vector<double> v) {
 
 /// run.json's "objects": per object its class, tracking counts and events
 /// (docs/io.md, "run.json"); and one line per object on stdout, e.g.
-/// "object 3 (cup): created 12, lost 150, found_again 171; tracked 270, refused 2, retried 1"
+/// "object 3 (cup): created 12, lost 150, found_again 171 (in_view); tracked 270, refused 2, retried 1"
 /// (and ", moved on hidden 9" for an object that was hidden behind others).
 void write_object_histories(Json& json, const ObjectHistories& histories, const std::vector<ObjectRecord>& records) {
   Json& objects = json["objects"] = Json::array();
@@ -340,6 +340,7 @@ void write_object_histories(Json& json, const ObjectHistories& histories, const 
     for (const ObjectEvent& e : h.events) {
       line += fmt::format("{}{} {}", line.empty() ? "" : ", ", to_string(e.kind), e.frame);
       if (e.kind == ObjectEventKind::deleted) line += fmt::format(" ({})", to_string(e.reason));
+      if (e.kind == ObjectEventKind::found_again) line += fmt::format(" ({})", to_string(e.by));
       if (e.kind == ObjectEventKind::merged) line += fmt::format(" (into {})", e.other);
       if (e.kind == ObjectEventKind::absorbed) line += fmt::format(" (object {})", e.other);
     }
@@ -617,7 +618,9 @@ void run(const RunOptions& o) {
       // On a terminal, each message starts a line of its own after the progress line.
       const char* const nl = tty ? "\n" : "";
       for (const int id : r.created) fmt::print(stderr, "{}frame {}: created object {}\n", nl, i, id);
-      for (const int id : r.reidentified) fmt::print(stderr, "{}frame {}: re-identified lost object {}\n", nl, i, id);
+      for (std::size_t k = 0; k < r.reidentified.size(); ++k)
+        fmt::print(stderr, "{}frame {}: re-identified lost object {} ({})\n", nl, i, r.reidentified[k],
+                   k < r.found_by.size() ? to_string(r.found_by[k]) : "?");
       for (const int id : r.relocalized)
         fmt::print(stderr, "{}frame {}: moved object {} onto its detection (relocalized)\n", nl, i, id);
       for (const int id : r.deleted)

@@ -126,7 +126,7 @@ TEST_CASE("run.json's object histories: counts, events and the deletion rule", "
   h.tracked = 40, h.refused = 2, h.moved_on = 3, h.retried = 1, h.from_prediction = 5;
   h.events = {{12, 0.4, ObjectEventKind::created, DeletionReason::none},
               {30, 1.0, ObjectEventKind::lost, DeletionReason::not_visible},
-              {45, 1.5, ObjectEventKind::found_again, DeletionReason::none},
+              {45, 1.5, ObjectEventKind::found_again, DeletionReason::none, 0, FoundBy::unexplained},
               {60, std::nan(""), ObjectEventKind::deleted, DeletionReason::not_visible}};
   const nlohmann::json back = nlohmann::json::parse(json_text(object_history_json(h, "cup")));
   CHECK(back.at("id").get<long long>() == 7);
@@ -146,6 +146,8 @@ TEST_CASE("run.json's object histories: counts, events and the deletion rule", "
   CHECK(events[1].at("rule").get<std::string>() == to_string(DeletionReason::not_visible));
   CHECK(events[2].at("event").get<std::string>() == "found_again");
   CHECK_FALSE(events[2].contains("rule"));
+  CHECK(events[2].at("by").get<std::string>() == "unexplained");
+  CHECK_FALSE(events[1].contains("by"));  // only found_again says how
   CHECK(events[3].at("event").get<std::string>() == "deleted");
   CHECK(events[3].at("timestamp").is_null());
   // An object with no events still has an (empty) array.

@@ -54,7 +54,9 @@ TEST_CASE("Object histories: created, tracked, retried, lost, found again, given
   map.lost.push_back(LostObject<S, Host>{object(1), 2});
   h.add(r, map);
   r = frame(3);
-  r.reidentified = {1};
+  r.found_again(1, FoundBy::in_view);
+  CHECK(r.reidentified == std::vector<int>{1});
+  CHECK(r.found_by == std::vector<FoundBy>{FoundBy::in_view});
   map.lost.clear();
   h.add(r, map);
   r = frame(4);
@@ -81,6 +83,7 @@ TEST_CASE("Object histories: created, tracked, retried, lost, found again, given
   CHECK(a.events[1].reason == DeletionReason::not_visible);
   CHECK(a.events[2].kind == ObjectEventKind::found_again);
   CHECK(a.events[2].frame == 3);
+  CHECK(a.events[2].by == FoundBy::in_view);
   CHECK(a.events[3].kind == ObjectEventKind::lost);
   CHECK(a.events[4].kind == ObjectEventKind::given_up);
   CHECK(a.events[4].frame == 5);

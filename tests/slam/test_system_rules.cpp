@@ -317,9 +317,10 @@ int pan_until_deleted(System<S, B>& sys, const BoxScene<S>& scene) {
 
 /// Pans back from frame `k` to the start over `now` (the box where it is
 /// now), without a detection; returns the pan step at which object 1 came
-/// back (-1: never), checking that nothing else was created or came back.
+/// back (-1: never), checking that nothing else was created or came back
+/// and that the frame reports it found `by` the rule the caller expects.
 template <class S, class B>
-int pan_back_until_found(System<S, B>& sys, const BoxScene<S>& now, int k) {
+int pan_back_until_found(System<S, B>& sys, const BoxScene<S>& now, int k, FoundBy by) {
   int found_at = -1;
   for (int j = k - 1, frame = k; j >= 0; --j) {
     const SE3<S> pose = SE3<S>(so3_exp(vec3(S(0), S(0.02) * S(j), S(0))), Vec3<S>::zero());
@@ -327,6 +328,7 @@ int pan_back_until_found(System<S, B>& sys, const BoxScene<S>& now, int k) {
     CHECK(r.created.empty());
     if (!r.reidentified.empty() && found_at < 0) {
       CHECK(r.reidentified == std::vector<int>{1});
+      CHECK(r.found_by == std::vector<FoundBy>{by});
       found_at = j;
     }
   }
@@ -405,6 +407,7 @@ TEMPLATE_LIST_TEST_CASE("An object that left the view is re-identified when dete
     const BoxScene<S> moved(vec3(S(0.04), S(0), S(1.2)));
     const FrameResult r = pan_back_and_detect(sys, scene, moved, k, "cup");
     CHECK(r.reidentified == std::vector<int>{1});
+    CHECK(r.found_by == std::vector<FoundBy>{FoundBy::detection});
     CHECK(r.created.empty());
     REQUIRE(sys.objects().size() == 1);
     CHECK(sys.objects()[0]->id() == 1);
@@ -800,7 +803,7 @@ TEMPLATE_LIST_TEST_CASE("A lost object the frame shows where it was lost comes b
   REQUIRE(k > 0);
   REQUIRE(sys.map().lost.size() == 1);
   // The way back, without a detection: where the box is now decides.
-  const auto pan_back = [&](const BoxScene<S>& now) { return pan_back_until_found(sys, now, k); };
+  const auto pan_back = [&](const BoxScene<S>& now) { return pan_back_until_found(sys, now, k, FoundBy::in_view); };
   SECTION("the box stood still: it is found on the way back and tracked to where it is") {
     const int found_at = pan_back(first.scene);
     INFO("lost at pan step " << k << ", found at step " << found_at);
@@ -848,7 +851,7 @@ TEMPLATE_LIST_TEST_CASE("A lost object back in view elsewhere is found in what n
   // camera pans back, without a detection, and sees it again about 20
   // frames later (0.67 s: it can have gone 0.67 m at refind_unexplained_speed).
   const BoxScene<S> moved(vec3(S(-0.3), S(0), S(1.2)));
-  const int found_at = pan_back_until_found(sys, moved, k);
+  const int found_at = pan_back_until_found(sys, moved, k, FoundBy::unexplained);
   INFO("lost at pan step " << k << ", found at step " << found_at);
   if (unexplained) {
     CHECK(found_at > 0);

@@ -17,7 +17,8 @@ namespace emfusion {
 /// One entry of run.json's "objects": {"id", "class", "tracked_frames",
 /// "refused_frames", "moved_on_frames", "retried_frames", "from_prediction_frames", "events"},
 /// each event {"event", "frame", "timestamp"} plus "rule" (the deletion
-/// rule) for `lost` and `deleted`, "into" (the id it goes on as) for
+/// rule) for `lost` and `deleted`, "by" ("detection", "in_view" or
+/// "unexplained": how it was found) for `found_again`, "into" (the id it goes on as) for
 /// `merged` and "from" (the id it took over) for `absorbed`. A timestamp that is not finite is
 /// written as null (json_text).
 inline Json object_history_json(const ObjectHistory& history, const std::string& class_name) {
@@ -36,6 +37,7 @@ inline Json object_history_json(const ObjectHistory& history, const std::string&
     event["frame"] = e.frame;
     event["timestamp"] = e.timestamp;
     if (e.kind == ObjectEventKind::deleted || e.kind == ObjectEventKind::lost) event["rule"] = to_string(e.reason);
+    if (e.kind == ObjectEventKind::found_again) event["by"] = to_string(e.by);
     if (e.kind == ObjectEventKind::merged) event["into"] = e.other;
     if (e.kind == ObjectEventKind::absorbed) event["from"] = e.other;
     events.push_back(std::move(event));

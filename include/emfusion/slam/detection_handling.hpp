@@ -184,7 +184,7 @@ DetectionUpdate<S, B> handle_detections(Map<S, B>& map, const Frame<S, B>& frame
   for (std::size_t d = 0; d < det.instances.size(); ++d) {
     if (match.object_of[d] >= 0) continue;
     if (auto w = reidentify(map, frame, det, int(d), seg, points, camera, params, norm, solver, outside)) {
-      result.reidentified.push_back(map.objects.back()->id());
+      result.found_again(map.objects.back()->id(), FoundBy::detection);
       update.fresh.push_back(std::move(*w));
       continue;
     }

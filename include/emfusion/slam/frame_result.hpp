@@ -35,6 +35,22 @@ inline const char* to_string(DeletionReason r) {
   return "unknown";
 }
 
+/// How a lost object was found again (FrameResult::found_by).
+enum class FoundBy {
+  detection,    ///< a detection matched no live object and its points fit the lost model (reidentify)
+  in_view,      ///< the frame showed it where it was lost or where its motion took it (refind_in_view)
+  unexplained,  ///< its model fit points that no live model explained (refind_unexplained)
+};
+
+inline const char* to_string(FoundBy b) {
+  switch (b) {
+    case FoundBy::detection: return "detection";
+    case FoundBy::in_view: return "in_view";
+    case FoundBy::unexplained: return "unexplained";
+  }
+  return "unknown";
+}
+
 /// What tracking did with a pose in one frame: the camera's
 /// (FrameResult::camera_tracking) or an object's (ObjectStatus::tracking).
 /// Every outcome but `tracked` and `moved_on` leaves the previous pose in place.
@@ -135,10 +151,13 @@ struct FrameResult {
   int invalid_detections = 0;           ///< instances ignored: label outside 1..65535 or repeated, score not finite
   int detections_over_cap = 0;          ///< unmatched detections not considered: max_objects objects were live
   std::vector<int> created, deleted;    ///< object ids
-  /// Lost objects (deleted as not visible) that a detection brought back,
-  /// or that the frame showed where they were lost (refind_in_view), with
-  /// their ids; they were in an earlier frame's `deleted`.
+  /// Lost objects (deleted as not visible) found again, by id: a detection
+  /// brought them back, or the frame showed them where they were lost
+  /// (refind_in_view) or in what no live model explains
+  /// (refind_unexplained); they were in an earlier frame's `deleted`.
   std::vector<int> reidentified;
+  /// How each of `reidentified` was found, in the same order (found_again adds to both).
+  std::vector<FoundBy> found_by;
   /// Live objects that tracking had left behind, moved onto a detection
   /// before detection handling (relocalize_below; docs/system.md).
   std::vector<int> relocalized;
@@ -148,6 +167,12 @@ struct FrameResult {
   std::vector<ObjectStatus> object_status;  ///< objects that existed before this frame, in Map::objects order
   int live_objects = 0;
   StageTimes times;
+
+  /// Records that lost object `id` was found again, and how.
+  void found_again(int id, FoundBy by) {
+    reidentified.push_back(id);
+    found_by.push_back(by);
+  }
 };
 
 }  // namespace emfusion

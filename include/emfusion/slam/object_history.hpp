@@ -1,6 +1,6 @@
 // What became of every object over a run, gathered from the FrameResults
 // the system returns: when it was created, lost (deleted as not visible and
-// kept for re-identification), found again, given up (a lost object kept
+// kept for re-identification), found again (and how), given up (a lost object kept
 // longer than lost_object_frames), relocalized (moved onto a detection after
 // its tracking left it behind), merged into another model of the same
 // object or absorbing one (merging.hpp) or deleted, with the rule that deleted it,
@@ -42,6 +42,7 @@ struct ObjectEvent {
   DeletionReason reason = DeletionReason::none;  ///< for `deleted`: the rule
   /// For `merged`: the object it went on as; for `absorbed`: the object it took over.
   int other = 0;
+  FoundBy by = FoundBy::detection;  ///< for `found_again`: how
 };
 
 /// One object's life.
@@ -74,7 +75,10 @@ class ObjectHistories {
       h.from_prediction += s.tracking == TrackingOutcome::tracked && s.from_prediction;
     }
     for (int id : r.created) event(id, ObjectEventKind::created);
-    for (int id : r.reidentified) event(id, ObjectEventKind::found_again);
+    for (std::size_t k = 0; k < r.reidentified.size(); ++k) {
+      event(r.reidentified[k], ObjectEventKind::found_again);
+      if (k < r.found_by.size()) history(r.reidentified[k]).events.back().by = r.found_by[k];
+    }
     for (int id : r.relocalized) event(id, ObjectEventKind::relocalized);
     std::vector<int> lost_now;
     for (const auto& l : map.lost) lost_now.push_back(l.object->id());

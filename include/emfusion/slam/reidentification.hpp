@@ -491,7 +491,7 @@ int refind_in_view(Map<S, B>& map, const Frame<S, B>& frame, const PinholeCamera
       ++k;
       continue;
     }
-    result.reidentified.push_back(map.bring_back(k).id());
+    result.found_again(map.bring_back(k).id(), FoundBy::in_view);
     ++found;
   }
   return found;

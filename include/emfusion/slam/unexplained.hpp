@@ -248,7 +248,7 @@ int refind_unexplained(Map<S, B>& map, const Frame<S, B>& frame, const PinholeCa
     if (!fit) continue;
     ObjectModel<S, B>& obj = map.bring_back(std::size_t(fit->candidate));
     detail::reidentification::move_to_fit(obj, map.T_world_camera, *fit);
-    result.reidentified.push_back(obj.id());
+    result.found_again(obj.id(), FoundBy::unexplained);
     ++found;
   }
   return found;
