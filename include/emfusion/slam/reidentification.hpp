@@ -235,6 +235,14 @@ bool consistent_with_frame(const ObjectModel<S, B>& o, const SE3<S>& T_volume_ca
   return n.drawn > 0 && 2 * n.drawn >= n.masked && 2 * n.agree >= n.drawn;
 }
 
+/// Detector frames an object must have been detected in to be looked for
+/// without a detection (refind_in_view, refind_unexplained): a false
+/// positive is seldom seen twice, and a model of nothing fits some patch
+/// of the frame, or is drawn where the frame shows the surface its false
+/// detection covered (on c214-tab600 a false "person", detected once,
+/// came back in view four times and took pixels of the book and the cup).
+inline constexpr int min_detections = 2;
+
 /// One candidate's fit to a detection (fit_to_target): the candidate's
 /// index in the caller's list, the share of the detection's points on its
 /// surface, and T_volume_camera.
@@ -438,7 +446,8 @@ std::optional<SE3<S>> carried_on_pose(const Map<S, B>& map, const LostObject<S, 
 /// border that it draws and no live object claims show the measured
 /// surface within likelihood.sigma of its own, and those are at least
 /// reidentify_min_inliers of the ones that do or show a surface behind it.
-/// An object that moved while it was out of view in any other way is drawn
+/// Only objects detected on at least min_detections detector frames are
+/// looked for. An object that moved while it was out of view in any other way is drawn
 /// where the frame now sees what was behind it, and stays lost until a
 /// detection finds it. The ids found are added to result.reidentified;
 /// returns how many.
@@ -476,7 +485,8 @@ int refind_in_view(Map<S, B>& map, const Frame<S, B>& frame, const PinholeCamera
   int found = 0;
   for (std::size_t k = 0; k < map.lost.size() && int(map.objects.size()) < params.max_objects;) {
     ObjectModel<S, B>& o = *map.lost[k].object;
-    if (map.lost[k].lost_at >= map.frames || params.ignores(o.class_name())) {
+    if (map.lost[k].lost_at >= map.frames || params.ignores(o.class_name()) ||
+        o.existence_count() < detail::reidentification::min_detections) {
       ++k;
       continue;
     }

@@ -61,11 +61,6 @@ struct MarkUnexplained {
   }
 };
 
-/// Detector frames an object must have been detected in to be looked for
-/// without a detection: a false positive is seldom seen twice, and a model
-/// of nothing fits some patch of what no model explains.
-inline constexpr int min_detections = 2;
-
 /// 1 for a marked pixel (the count of MarkUnexplained's marks).
 struct CountMarked {
   ImageView<const std::uint8_t> marked;
@@ -191,7 +186,7 @@ int refind_unexplained(Map<S, B>& map, const Frame<S, B>& frame, const PinholeCa
   if (result.detector_frame || !result.reidentified.empty()) return 0;
   const auto is_candidate = [&](const LostObject<S, B>& l) {
     return l.lost_at < map.frames && !params.ignores(l.object->class_name()) &&
-           l.object->existence_count() >= detail::unexplained::min_detections;
+           l.object->existence_count() >= detail::reidentification::min_detections;
   };
   bool any = false;
   for (const LostObject<S, B>& l : map.lost) any = any || is_candidate(l);
