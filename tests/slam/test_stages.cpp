@@ -4,7 +4,8 @@
 // poses, one camera tracking step, rendering, resizing from a detection,
 // deletion by the existence rule, and the rules counted only where the
 // object is visible, with unseen and weakly associated objects kept as lost,
-// an object left behind by its tracking moved onto its detection, and two
+// an object left behind by its tracking moved onto its detection, detections
+// matched only where the frame shows an object, and two
 // models of one object merged; then the full system with a
 // likelihood, a norm and a solver defined here, as a user would.
 #include <cmath>
@@ -390,22 +391,31 @@ TEMPLATE_LIST_TEST_CASE("Stages alone: an object left behind by its tracking mov
   observe();
   const Detections det = box_detection(labels, "cup");
   const HuberNorm<S> huber{S(2)};
+  // Relocalization with `detections` moves nothing.
+  const auto stays = [&](const Detections& detections) {
+    CHECK(relocalize_objects(m.map, m.frame, detections, m.frame.segmentation.to_host(), m.s.camera, m.s.params,
+                             huber, LevenbergMarquardt{})
+              .empty());
+    CHECK(double(norm(m.map.objects[0]->pose().translation() - before.translation())) == 0.0);
+  };
 
   SECTION("off (0): nothing moves") {
     m.s.params.relocalize_below = 0;
-    CHECK(relocalize_objects(m.map, m.frame, det, m.frame.segmentation.to_host(), m.s.camera, m.s.params, huber,
-                             LevenbergMarquardt{})
-              .empty());
-    CHECK(double(norm(m.map.objects[0]->pose().translation() - before.translation())) == 0.0);
+    stays(det);
   }
   SECTION("a detection of another class does not take it") {
     m.s.params.relocalize_below = 0.5;
-    CHECK(relocalize_objects(m.map, m.frame, box_detection(labels, "book"), m.frame.segmentation.to_host(),
-                             m.s.camera, m.s.params, huber, LevenbergMarquardt{})
-              .empty());
+    m.map.objects[0]->count_detected();
+    stays(box_detection(labels, "book"));
   }
-  SECTION("on: it moves onto the detection, which then matches it; no second object") {
+  SECTION("detected once, as a model made from a false positive is, it stays") {
     m.s.params.relocalize_below = 0.5;
+    REQUIRE(m.map.objects[0]->existence_count() == 1);
+    stays(det);
+  }
+  SECTION("on, detected twice: it moves onto the detection, which then matches it; no second object") {
+    m.s.params.relocalize_below = 0.5;
+    m.map.objects[0]->count_detected();
     const std::vector<int> moved = relocalize_objects(m.map, m.frame, det, m.frame.segmentation.to_host(), m.s.camera,
                                                       m.s.params, huber, LevenbergMarquardt{});
     REQUIRE(moved.size() == 1);
@@ -420,6 +430,72 @@ TEMPLATE_LIST_TEST_CASE("Stages alone: an object left behind by its tracking mov
     CHECK(r.matched == 1);
     CHECK(r.created.empty());
     CHECK(m.map.objects.size() == 1);
+  }
+}
+
+TEMPLATE_LIST_TEST_CASE("Stages alone: detections match an object only where the frame shows it", "[slam]",
+                        emfusion::test::HeavyConfigs) {
+  using S = typename TestType::Scalar;
+  using B = typename TestType::Backend;
+  OneFrameMap<S, B> m;
+  REQUIRE(m.map.objects.size() == 1);
+  ObjectModel<S, B>& box = *m.map.objects[0];
+  // Something no model holds (shape 4, a ball 0.5 m nearer) passes in front
+  // of the box's object and hides it; the detector sees the ball, of the
+  // box object's class.
+  m.s.scene.add(sim::make_sphere(vec3(S(0), S(0), S(0.7)), S(0.15)));
+  Image<int, Host> labels;
+  const Image<S, B> depth = m.s.template depth<B>(SE3<S>::identity(), &labels);
+  PaperLikelihood<S> likelihood;
+  likelihood.params = m.s.params.likelihood;
+  preprocess(depth, m.s.camera, m.s.params, m.frame);
+  associate(m.map, m.frame, likelihood, m.s.params);
+  render_models(m.map, m.frame, m.s.camera, m.s.params, m.workspace);
+  Detections ball;
+  {
+    std::vector<std::uint16_t> px;
+    for (int l : labels.to_host()) px.push_back(std::uint16_t(l == 4 ? 7 : 0));
+    ball.labels = Image<std::uint16_t, Host>::from_host(labels.width(), labels.height(), px);
+    ball.instances.push_back({7, box.class_name(), 0.9});
+  }
+  const std::vector<int> drawn = m.frame.segmentation.to_host();
+  const std::vector<int> seen = seen_segmentation(m.frame, m.s.params, m.workspace);
+  const std::vector<int> shape = labels.to_host();
+  REQUIRE(seen.size() == drawn.size());
+  int drawn_on_ball = 0, seen_on_ball = 0, changed_elsewhere = 0;
+  for (std::size_t i = 0; i < seen.size(); ++i) {
+    if (shape[i] == 4) {
+      drawn_on_ball += drawn[i] == 1, seen_on_ball += seen[i] == 1;
+      if (drawn[i] == 1) CHECK(seen[i] == 0);  // behind the ball: background, as the frame shows it
+    } else {
+      changed_elsewhere += seen[i] != drawn[i];
+    }
+  }
+  INFO("object drawn on " << drawn_on_ball << " of the ball's pixels");
+  REQUIRE(drawn_on_ball > 200);  // the model is drawn behind the ball ...
+  CHECK(seen_on_ball == 0);      // ... and seen nowhere there
+  CHECK(changed_elsewhere == 0);
+
+  const HuberNorm<S> huber{S(2)};
+  SECTION("the drawn segmentation would give the ball's detection to the hidden object") {
+    FrameResult r;
+    const DetectionUpdate<S, B> u = handle_detections(m.map, m.frame, ball, drawn, m.s.camera, m.s.params, likelihood,
+                                                      huber, LevenbergMarquardt{}, r);
+    CHECK(r.matched == 1);
+    CHECK(u.object_of_detection[0] == 0);
+  }
+  SECTION("matched as the frame shows it, it does not: the ball is an object of its own, the box is neither "
+          "detected nor missed") {
+    const int detected = box.existence_count(), missed = box.non_existence_count();
+    FrameResult r;
+    const DetectionUpdate<S, B> u = handle_detections(m.map, m.frame, ball, drawn, m.s.camera, m.s.params, likelihood,
+                                                      huber, LevenbergMarquardt{}, r, &seen);
+    CHECK(r.matched == 0);
+    CHECK(u.object_of_detection[0] == -1);
+    CHECK(r.created.size() == 1);
+    CHECK(m.map.objects.size() == 2);
+    CHECK(box.existence_count() == detected);
+    CHECK(box.non_existence_count() == missed);
   }
 }
 

@@ -153,7 +153,7 @@ const std::vector<ParameterEntry<S>>& parameter_table() {
       EMF_NUMBER("reidentify_mask_fraction", reidentify_mask_fraction,
                  "a detection re-identifies a lost object with this fraction of min_mask_pixels points of its own"),
       EMF_NUMBER("relocalize_below", relocalize_below,
-                 "move unmatched objects with a lower mean association onto a detection (0: off)"),
+                 "move unmatched objects detected twice or more with a lower mean association onto a detection (0: off)"),
       EMF_NUMBER("merge_min_inliers", merge_min_inliers,
                  "merge two models of one object when this share of a detection fits both (0: off)"),
       EMF_BOOL("young_object_grace", young_object_grace, "new objects survive invisibility until the next detection"),

@@ -139,7 +139,11 @@ std::optional<NewObjectWeights<S, B>> create_object(Map<S, B>& map, const Detect
 
 /// Stage 5: matching, existence counts, resizing, re-identification and
 /// creation for the detections `det` of a mapped frame (usable_detections
-/// first), against frame.segmentation as rendered this frame. `likelihood`
+/// first), against `seg`, frame.segmentation as rendered this frame, on the
+/// host. With `seen` (seen_segmentation), a detection matches an object by
+/// the pixels where the frame shows it, and a miss counts only for an
+/// object the frame shows: one drawn behind something nearer that no model
+/// holds neither takes that thing's detection nor misses it. `likelihood`
 /// gives the first-view weights' `outside` value; `norm` (in voxels of each
 /// object) and `solver` align lost objects.
 template <class S, Backend B, class Likelihood, class Norm, class Solver>
@@ -147,35 +151,38 @@ template <class S, Backend B, class Likelihood, class Norm, class Solver>
 DetectionUpdate<S, B> handle_detections(Map<S, B>& map, const Frame<S, B>& frame, const Detections& det,
                                         const std::vector<int>& seg, const PinholeCamera<S>& camera,
                                         const SystemParams<S>& params, const Likelihood& likelihood,
-                                        const Norm& norm, const Solver& solver, FrameResult& result) {
+                                        const Norm& norm, const Solver& solver, FrameResult& result,
+                                        const std::vector<int>* seen = nullptr) {
   detail::require(det.labels.width() == camera.width && det.labels.height() == camera.height, "handle_detections",
                   "detection label image is " + std::to_string(det.labels.width()) + "x" +
                       std::to_string(det.labels.height()) + " but the camera is " + std::to_string(camera.width) +
                       "x" + std::to_string(camera.height));
   DetectionUpdate<S, B> update;
-  const DetectionMatch match = match_detections(mask_iou(det, seg, int(map.objects.size())), params.match_iou);
+  const std::vector<int>& shown = seen ? *seen : seg;
+  const DetectionMatch match = match_detections(mask_iou(det, shown, int(map.objects.size())), params.match_iou);
   update.object_of_detection = match.object_of;
 
-  std::vector<bool> seen(map.objects.size(), false);
+  std::vector<bool> matched(map.objects.size(), false);
   const std::vector<Vec3<S>> points = frame.points.to_host();
   const std::uint16_t* labels = det.labels.view().data;
   for (std::size_t d = 0; d < det.instances.size(); ++d) {
     const int o = match.object_of[d];
     if (o < 0) continue;
     ++result.matched;
-    seen[std::size_t(o)] = true;
+    matched[std::size_t(o)] = true;
     ObjectModel<S, B>& obj = *map.objects[std::size_t(o)];
     obj.add_class_score(det.instances[d].class_name, det.instances[d].score);
     grow_for_detection(obj, points, labels, det.instances[d].label, map.T_world_camera, camera, params);
   }
   // A miss counts only for an object the detector could have seen: visible
-  // in the rendered segmentation (the lifecycle's rule, rendered pixels
-  // only), or a person kept for association only (never rendered).
+  // in the segmentation (the lifecycle's rule, rendered pixels only; with
+  // `seen`, where the frame shows it), or a person kept for association
+  // only (never rendered).
   const std::vector<int> drawn = inner_pixels_per_object(
-      seg, camera.width, camera.height, int(map.objects.size()), params.visibility_border_for(camera.width));
+      shown, camera.width, camera.height, int(map.objects.size()), params.visibility_border_for(camera.width));
   const int min_pixels = params.keep_mask_pixels_for(camera.width, camera.height);
   for (std::size_t o = 0; o < map.objects.size(); ++o) {
-    if (seen[o])
+    if (matched[o])
       map.objects[o]->count_detected();
     else if (drawn[o] >= min_pixels || params.ignores(map.objects[o]->class_name()))
       map.objects[o]->count_missed();

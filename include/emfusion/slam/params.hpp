@@ -159,7 +159,8 @@ struct SystemParams {
   /// the creation rule.
   double reidentify_mask_fraction = 0.5;
   /// Objects left behind (docs/system.md): on a detector frame, a live
-  /// object that no detection matched and whose mean association over the
+  /// object that no detection matched, that was detected twice or more,
+  /// and whose mean association over the
   /// pixels it is drawn on is below this is tried against the unmatched
   /// detections of its class, as a lost object is, and moved onto the one
   /// it fits (reidentify_min_inliers). 0: off (the paper).

@@ -236,7 +236,8 @@ bool consistent_with_frame(const ObjectModel<S, B>& o, const SE3<S>& T_volume_ca
 }
 
 /// Detector frames an object must have been detected in to be looked for
-/// without a detection (refind_in_view, refind_unexplained): a false
+/// without a detection (refind_in_view, refind_unexplained), or to be
+/// moved onto a detection it was not matched to (relocalize_objects): a false
 /// positive is seldom seen twice, and a model of nothing fits some patch
 /// of the frame, or is drawn where the frame shows the surface its false
 /// detection covered (on c214-tab600 a false "person", detected once,
@@ -355,22 +356,29 @@ std::optional<NewObjectWeights<S, B>> reidentify(Map<S, B>& map, const Frame<S, 
 /// live object (mask IoU, as handle_detections) is tried against the live
 /// objects of its class that no detection matched and whose mean
 /// association over the pixels they are drawn on is below
-/// params.relocalize_below: each is aligned to the detection's points as a
+/// params.relocalize_below and that was detected at least
+/// detail::reidentification::min_detections times (a model made from one
+/// false positive, a patch of a room, fits the points of many a
+/// detection): each is aligned to the detection's points as a
 /// lost object is (reidentify), and the best with at least
 /// reidentify_min_inliers of the points on its surface that is consistent
 /// with the frame there (best_shown_fit) moves there, with its id and model. Returns the
 /// ids of the objects moved; when there are any, the frame's associations
 /// and rendering are out of date: associate
 /// and render_models again before detection handling, which then matches
-/// the detection to the moved object (System does).
+/// the detection to the moved object (System does). With `seen`
+/// (seen_segmentation), detections match objects as handle_detections
+/// matches them: by the pixels where the frame shows them.
 template <class S, Backend B, class Norm, class Solver>
   requires RobustNorm<Norm, S> && PoseSolver<Solver, S>
 std::vector<int> relocalize_objects(Map<S, B>& map, const Frame<S, B>& frame, const Detections& det,
                                     const std::vector<int>& seg, const PinholeCamera<S>& camera,
-                                    const SystemParams<S>& params, const Norm& norm, const Solver& solver) {
+                                    const SystemParams<S>& params, const Norm& norm, const Solver& solver,
+                                    const std::vector<int>* seen = nullptr) {
   std::vector<int> moved;
   if (!(params.relocalize_below > 0) || map.objects.empty() || det.instances.empty()) return moved;
-  const DetectionMatch match = match_detections(mask_iou(det, seg, int(map.objects.size())), params.match_iou);
+  const DetectionMatch match =
+      match_detections(mask_iou(det, seen ? *seen : seg, int(map.objects.size())), params.match_iou);
   // Candidates: unmatched objects of a class some unmatched detection has,
   // weakly associated. Their association images and the frame's points are
   // read on the host only when there is one.
@@ -386,6 +394,7 @@ std::vector<int> relocalize_objects(Map<S, B>& map, const Frame<S, B>& frame, co
   for (std::size_t k = 0; k < map.objects.size(); ++k) {
     const std::string& class_name = map.objects[k]->class_name();
     candidate[k] = candidate[k] && !params.ignores(class_name) && unmatched_detection_of(class_name) &&
+                   map.objects[k]->existence_count() >= detail::reidentification::min_detections &&
                    detail::reidentification::mean_association(frame, seg, int(k)) < params.relocalize_below;
     any = any || candidate[k];
   }

@@ -132,8 +132,10 @@ class System {
       return finish(result);
     }
     // Detection handling reads the segmentation on the host (detector
-    // frames only); it changes only when objects are relocalized below.
+    // frames only), and matches by it as the frame shows it; both change
+    // only when objects are relocalized below.
     std::vector<int> seg = detections ? frame_.segmentation.to_host() : std::vector<int>{};
+    std::vector<int> seen = detections ? seen_segmentation(frame_, params_, render_workspace_) : std::vector<int>{};
     Detections checked;
     const Detections* det = detections ? &usable_detections(*detections, checked, result) : nullptr;
     if (det) {
@@ -141,17 +143,18 @@ class System {
       // first (relocalize_below; 0 turns it off); the frame's E-step and
       // rendering are then redone at their new poses.
       result.relocalized =
-          relocalize_objects(map_, frame_, *det, seg, camera_, params_, parts_.object_norm, parts_.solver);
+          relocalize_objects(map_, frame_, *det, seg, camera_, params_, parts_.object_norm, parts_.solver, &seen);
       if (!result.relocalized.empty()) {
         associate(map_, frame_, parts_.likelihood, params_, true);  // only objects moved
         render_models(map_, frame_, camera_, params_, render_workspace_);
         seg = frame_.segmentation.to_host();
+        seen = seen_segmentation(frame_, params_, render_workspace_);
       }
     }
     DetectionUpdate<S, B> update;
     if (det)
       update = handle_detections(map_, frame_, *det, seg, camera_, params_, parts_.likelihood, parts_.object_norm,
-                                 parts_.solver, result);
+                                 parts_.solver, result, &seen);
     clock_.lap(result.times.detections);
 
     integrate_models(map_, frame_, camera_, params_, update.fresh, starts_map, &integration_workspace_,
