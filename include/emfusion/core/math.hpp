@@ -1,9 +1,10 @@
 // Small fixed-size vectors and matrices usable in device code.
 //
-// Eigen is the library's host-side linear algebra (solvers, evaluation); the
-// per-pixel and per-voxel maths in kernels uses these plain aggregates instead,
-// which compile identically under g++ and nvcc and cost nothing to copy into a
-// kernel. `core/eigen.hpp` converts between the two.
+// The library's maths, per pixel and per voxel in kernels and on the host
+// (the solvers' 6x6 systems, evaluation's alignments), uses these plain
+// aggregates: they compile identically under g++ and nvcc and cost nothing
+// to copy into a kernel. No header includes Eigen (eval/alignment.hpp says
+// why); the build still finds it, as DESIGN.md allows.
 #pragma once
 
 #include <cmath>
