@@ -159,11 +159,11 @@ struct SystemParams {
   /// the creation rule.
   double reidentify_mask_fraction = 0.5;
   /// Objects left behind (docs/system.md): on a detector frame, a live
-  /// object that no detection matched, that was detected twice or more,
-  /// and whose mean association over the
-  /// pixels it is drawn on is below this is tried against the unmatched
-  /// detections of its class, as a lost object is, and moved onto the one
-  /// it fits (reidentify_min_inliers). 0: off (the paper).
+  /// object that no detection matched, that was detected twice or more and
+  /// whose mean association over the pixels it is drawn on is below this
+  /// is tried against the unmatched detections of its class, as a lost
+  /// object is, and moved onto the one it fits (reidentify_min_inliers).
+  /// 0: off (the paper).
   double relocalize_below = 0.5;
   /// Duplicates (docs/system.md, "Merging duplicates"): on a detector
   /// frame, an object that a detection matched is one with a lost object
