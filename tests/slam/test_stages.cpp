@@ -70,14 +70,20 @@ struct WallAndBox {
   }
 };
 
-/// The box's pixels as detection instance 5 of `class_name`.
-inline Detections box_detection(const Image<int, Host>& labels, const std::string& class_name) {
+/// The pixels of scene shape `shape` (`labels`, as sim::render_depth
+/// writes them) as detection instance 5 of `class_name`.
+inline Detections shape_detection(const Image<int, Host>& labels, int shape, const std::string& class_name) {
   Detections d;
   std::vector<std::uint16_t> px;
-  for (int l : labels.to_host()) px.push_back(std::uint16_t(l == 1 ? 5 : 0));
+  for (int l : labels.to_host()) px.push_back(std::uint16_t(l == shape ? 5 : 0));
   d.labels = Image<std::uint16_t, Host>::from_host(labels.width(), labels.height(), px);
   d.instances.push_back({5, class_name, 0.9});
   return d;
+}
+
+/// The box's pixels (shape 1) as detection instance 5 of `class_name`.
+inline Detections box_detection(const Image<int, Host>& labels, const std::string& class_name) {
+  return shape_detection(labels, 1, class_name);
 }
 
 /// The mean of `values` over the pixels where `labels` is `label`.
@@ -451,13 +457,7 @@ TEMPLATE_LIST_TEST_CASE("Stages alone: detections match an object only where the
   preprocess(depth, m.s.camera, m.s.params, m.frame);
   associate(m.map, m.frame, likelihood, m.s.params);
   render_models(m.map, m.frame, m.s.camera, m.s.params, m.workspace);
-  Detections ball;
-  {
-    std::vector<std::uint16_t> px;
-    for (int l : labels.to_host()) px.push_back(std::uint16_t(l == 4 ? 7 : 0));
-    ball.labels = Image<std::uint16_t, Host>::from_host(labels.width(), labels.height(), px);
-    ball.instances.push_back({7, box.class_name(), 0.9});
-  }
+  const Detections ball = shape_detection(labels, 4, box.class_name());
   const std::vector<int> drawn = m.frame.segmentation.to_host();
   const std::vector<int> seen = seen_segmentation(m.frame, m.s.params, m.workspace);
   const std::vector<int> shape = labels.to_host();
