@@ -8,7 +8,8 @@
 // from the pose they were lost in and only as far as they can have moved;
 // with refind_in_view found again without a detection where the frame shows
 // them where they were lost; found in what no model explains when it comes
-// back elsewhere), a new object at the border survives until
+// back elsewhere, a group no lost object fitted not fitted again until it
+// changes), a new object at the border survives until
 // seen, an object that passes behind another moves on at its velocity
 // and is found where it comes out, and of the fits of lost objects to a
 // detection the best that the frame shows is taken.
@@ -578,6 +579,22 @@ TEST_CASE("Without a class, a group two objects fit about as well is left alone"
   CHECK(unambiguous(std::vector<Fit>{{0, 0.95, id}, {1, 0.58, id}}, 0.6, 0.05));
   CHECK(unambiguous(std::vector<Fit>{{0, 0.5, id}, {1, 0.5, id}}, 0.6, 0.05));
   CHECK(unambiguous(std::vector<Fit>{}, 0.6, 0.05));
+}
+
+TEST_CASE("A group no lost object was found in is not fitted again until it changes", "[slam]") {
+  using detail::unexplained::retry_frames;
+  using detail::unexplained::tried_before;
+  using detail::unexplained::TriedGroup;
+  const std::vector<int> ids{3, 5};
+  const Vec3<double> c = vec3(1.0, 0.0, 2.0);
+  const std::vector<TriedGroup<double>> tried{{c, 2000, 100, ids}};
+  CHECK(tried_before(tried, c, 2000, 101, ids));                       // the same group on the next frame
+  CHECK(tried_before(tried, vec3(1.03, 0.0, 2.0), 2150, 110, ids));    // 3 cm over, 7.5 % larger
+  CHECK_FALSE(tried_before(tried, c, 2000, 100 + retry_frames, ids));  // tried long enough ago
+  CHECK_FALSE(tried_before(tried, c, 2200, 101, ids));                 // grown by a tenth
+  CHECK_FALSE(tried_before(tried, vec3(1.1, 0.0, 2.0), 2000, 101, ids));  // another group
+  CHECK_FALSE(tried_before(tried, c, 2000, 101, std::vector<int>{3, 5, 7}));  // one more object lost since
+  CHECK_FALSE(tried_before(std::vector<TriedGroup<double>>{}, c, 2000, 101, ids));
 }
 
 TEMPLATE_LIST_TEST_CASE("A lost object is fitted first from its last pose, and only as far as it can have moved",

@@ -36,18 +36,20 @@ struct ObjectIntegrationWorkspace {
 /// model k with weights frame.associations.image(k), the last fresh.size()
 /// objects (added by detection handling) with their first-view weights.
 /// `first`: the frame that starts the map, which has no association images;
-/// the background then takes every pixel with weight 1. The workspaces
+/// the background then takes every pixel with weight 1.
+/// `background_weights` (optional) replaces the background's association
+/// image as its weights (hold_unexplained, unexplained.hpp). The workspaces
 /// (optional) keep the buffers of a dense and of a sparse background, and
 /// `objects_workspace` those of the objects, which then integrate at once
 /// (without it, one after another through `workspace`).
 template <class S, Backend B>
 void integrate_models(Map<S, B>& map, const Frame<S, B>& frame, const PinholeCamera<S>& camera,
                       const SystemParams<S>& params, const std::vector<NewObjectWeights<S, B>>& fresh, bool first,
-                      IntegrationWorkspace<S, B>* workspace = nullptr,
+                      const Image<S, B>* background_weights = nullptr, IntegrationWorkspace<S, B>* workspace = nullptr,
                       SparseIntegrationWorkspace<S, B>* sparse_workspace = nullptr,
                       ObjectIntegrationWorkspace<S, B>* objects_workspace = nullptr) {
   const std::size_t old_objects = map.objects.size() - fresh.size();
-  const Image<S, B>* background_weights = first ? nullptr : &frame.associations.image(0);
+  if (!background_weights && !first) background_weights = &frame.associations.image(0);
   map.background.visit([&](auto& background) {
     if constexpr (requires { background.allocated_blocks(); })
       integrate(background, frame.depth, camera, map.T_world_camera, background_weights,

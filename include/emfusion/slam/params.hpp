@@ -217,6 +217,11 @@ struct SystemParams {
   /// ... and an object is looked for only as far from where it was last
   /// tracked as it can have gone at this speed (m/s).
   double refind_unexplained_speed = 1.0;
+  /// While such a lost object exists, the background does not fuse what no
+  /// model explains on frames without detections (hold_unexplained,
+  /// unexplained.hpp): otherwise it takes in an object that comes back and
+  /// stands still before refind_unexplained sees enough of it.
+  bool hold_unexplained = true;
 
   // Rendering (sec. 3.5).
   S min_foreground = S(0.5);     ///< object voxels render where p_fg exceeds this

@@ -105,6 +105,37 @@ struct CountInView {
   }
 };
 
+/// Whether the frame shows object `o` placed at T_volume_camera, as far as
+/// no live object covers it: of the pixels inside the visibility border
+/// that its model draws (surfaces of p_fg above 1/2, depth only) and no
+/// live object claims, at least keep_mask_pixels show the measured surface
+/// within likelihood.sigma of its own, and those are at least
+/// reidentify_min_inliers of the ones that do or show a surface behind it
+/// (CountInView). `drawn` keeps the cast's images between calls.
+template <class S, Backend B>
+bool shown_in_view(const ObjectModel<S, B>& o, const SE3<S>& T_volume_camera, const Frame<S, B>& frame,
+                   const PinholeCamera<S>& camera, const SystemParams<S>& params, RaycastResult<S, B>& drawn) {
+  const int min_pixels = params.keep_mask_pixels_for(camera.width, camera.height);
+  // Only the pixels its volume projects to can show it: none when it is
+  // out of view (no cast, no count).
+  const PixelBox box = projected_box(camera, T_volume_camera.inverse(), Vec3<S>::zero(), o.volume().view().extent());
+  if (box.area() < min_pixels) return false;
+  RaycastParams<S> rp;
+  rp.surface = false;
+  raycast(o.volume(), camera, o.volume().pose() * T_volume_camera, drawn, rp, &o.foreground());
+  const InViewPixels n = transform_reduce_index(
+      frame.points.backend(), box.area(),
+      PixelsInBox<CountInView<S>>{{{std::as_const(drawn.hit).view(), std::as_const(drawn.depth).view(),
+                                    frame.points.view()},
+                                   frame.segmentation.view(),
+                                   params.visibility_border_for(camera.width),
+                                   params.likelihood.sigma},
+                                  box,
+                                  camera.width},
+      InViewPixels{}, thrust::plus<InViewPixels>());
+  return n.agree >= min_pixels && double(n.agree) >= double(params.reidentify_min_inliers) * (n.agree + n.behind);
+}
+
 }  // namespace detail::reidentification
 
 namespace detail::reidentification {
@@ -464,32 +495,12 @@ template <class S, Backend B>
 int refind_in_view(Map<S, B>& map, const Frame<S, B>& frame, const PinholeCamera<S>& camera,
                    const SystemParams<S>& params, FrameResult& result) {
   if (!params.refind_in_view || map.lost.empty() || map.camera_trajectory.empty()) return 0;
-  const int min_pixels = params.keep_mask_pixels_for(camera.width, camera.height);
-  const int border = params.visibility_border_for(camera.width);
   const double now = map.camera_trajectory.back().timestamp;
   RaycastResult<S, B> drawn;
-  RaycastParams<S> rp;
-  rp.surface = false;
   // True where the frame shows o's model at its present pose.
   const auto shown = [&](const ObjectModel<S, B>& o) {
     const SE3<S> T_volume_camera = (o.pose() * o.T_object_volume()).inverse() * map.T_world_camera;
-    // Only the pixels its volume projects to can show it: none when it is
-    // out of view (no cast, no count).
-    const PixelBox box =
-        projected_box(camera, T_volume_camera.inverse(), Vec3<S>::zero(), o.volume().view().extent());
-    if (box.area() < min_pixels) return false;
-    raycast(o.volume(), camera, o.volume().pose() * T_volume_camera, drawn, rp, &o.foreground());
-    const detail::reidentification::InViewPixels n = transform_reduce_index(
-        frame.points.backend(), box.area(),
-        detail::PixelsInBox<detail::reidentification::CountInView<S>>{
-            {{std::as_const(drawn.hit).view(), std::as_const(drawn.depth).view(), frame.points.view()},
-             frame.segmentation.view(),
-             border,
-             params.likelihood.sigma},
-            box,
-            camera.width},
-        detail::reidentification::InViewPixels{}, thrust::plus<detail::reidentification::InViewPixels>());
-    return n.agree >= min_pixels && double(n.agree) >= double(params.reidentify_min_inliers) * (n.agree + n.behind);
+    return detail::reidentification::shown_in_view(o, T_volume_camera, frame, camera, params, drawn);
   };
   int found = 0;
   for (std::size_t k = 0; k < map.lost.size() && int(map.objects.size()) < params.max_objects;) {

@@ -8,8 +8,10 @@
 //   4. raycast every model: the segmentation             (rendering.hpp)
 //   5. on detector frames: match, existence, lost objects re-identified,
 //      new objects, resizing                             (detection_handling.hpp)
-//   6. integrate the frame into every model, weighted by its association;
-//      foreground counts from the matched detections     (mapping.hpp)
+//   6. integrate the frame into every model, weighted by its association
+//      (while lost objects may come back, the background leaves out what
+//      no model explains: unexplained.hpp); foreground counts from the
+//      matched detections                                (mapping.hpp)
 //   7. delete unlikely, invisible or weakly associated objects
 //                                                        (lifecycle.hpp)
 //   8. on detector frames: merge two models found to be one object
@@ -157,8 +159,13 @@ class System {
                                  parts_.solver, result, &seen);
     clock_.lap(result.times.detections);
 
-    integrate_models(map_, frame_, camera_, params_, update.fresh, starts_map, &integration_workspace_,
-                     &sparse_workspace_, &object_integration_workspace_);
+    // While a lost object may come back as what no model explains, the
+    // background does not take that in (hold_unexplained).
+    const bool held = hold_unexplained(map_, frame_, params_, det != nullptr, held_background_weights_,
+                                       &unexplained_.marks);
+    integrate_models(map_, frame_, camera_, params_, update.fresh, starts_map,
+                     held ? &held_background_weights_ : nullptr, &integration_workspace_, &sparse_workspace_,
+                     &object_integration_workspace_);
     map_.started = true;
     clock_.lap(result.times.integrate);
     if (det) update_foreground_counts(map_, frame_, *det, seg, update.object_of_detection, update.fresh, camera_);
@@ -182,7 +189,7 @@ class System {
     // ... and those back in view elsewhere, in what no model explains
     // (refind_unexplained_every; 0 turns it off).
     refind_unexplained(map_, frame_, camera_, params_, parts_.object_norm, parts_.solver, result,
-                       &unexplained_marks_);
+                       &unexplained_);
     // Deleted and resized (detector frames) object volumes are freed memory
     // the C library may keep; on the CPU that is resident memory.
     if constexpr (!B::is_device)
@@ -204,6 +211,7 @@ class System {
                       "the map's background grid differs from the parameters' one");
     }
     map_ = std::move(map);
+    unexplained_ = {};  // its groups are of the frames before
   }
 
   const PinholeCamera<S>& camera() const { return camera_; }
@@ -291,7 +299,8 @@ class System {
   ObjectIntegrationWorkspace<S, B> object_integration_workspace_;
   ObjectPixelsWorkspace<S, B> object_pixels_workspace_;
   DrawnCoverWorkspace<S, B> drawn_cover_workspace_;
-  Image<std::uint8_t, B> unexplained_marks_;  // refind_unexplained's marks
+  UnexplainedWorkspace<S, B> unexplained_;  // hold_unexplained's and refind_unexplained's
+  Image<S, B> held_background_weights_;     // hold_unexplained's
   SparseIntegrationWorkspace<S, B> sparse_workspace_;
   /// The stage times of the frame being processed: on CUDA events queued at
   /// each stage's end and read once at its finish, so the device is not

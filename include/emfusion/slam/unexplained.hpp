@@ -5,7 +5,10 @@
 // Each such patch (a connected group of pixels, depth-continuous) is treated
 // as a detection of unknown class: every lost object is aligned to it as
 // re-identification aligns one to a detection (fit_to_target), and the best
-// fit the frame shows (best_shown_fit) brings its object back.
+// fit the frame shows (best_shown_fit) brings its object back. While a lost
+// object may come back, the background does not fuse those points
+// (hold_unexplained): it would take an object that stands still in within a
+// few frames, from its edges and from space it had not seen before.
 #pragma once
 
 #include <algorithm>
@@ -32,14 +35,23 @@ namespace emfusion {
 
 namespace detail::unexplained {
 
+/// How far behind an unobserved point MarkUnexplained looks for a surface
+/// the background has observed: this many steps of half its truncation
+/// (1 m at the paper's 10 cm).
+inline constexpr int behind_steps = 20;
+
 /// 1 where pixel i (inside the visibility border) shows a measured point
 /// that no live object is drawn on (`segmentation` 0) or claims in the
 /// E-step (the background's association is 1 where the point is in no
 /// live object's volume: the parts of a live object its model has not
 /// seen yet are not unexplained) and that lies further
 /// than `tolerance` from the background's surface where the background has
-/// observed that place (a place seen for the first time is new background,
-/// not an object).
+/// observed that place. Where it has not, the point is unexplained only if
+/// it stands in front of a surface the background has observed (in_front):
+/// something in space a moving object hid before (on c215 of the
+/// generalisation benchmark, a lost bottle uncovered by a teddy bear
+/// walking away from in front of it). A place seen for the first time with
+/// nothing known behind it is new background, not an object.
 template <class S, class View>
 struct MarkUnexplained {
   ImageView<const Vec3<S>> points;
@@ -50,15 +62,75 @@ struct MarkUnexplained {
   int border;
   S tolerance;
   std::uint8_t* out;
+
+  /// True where the ray through camera-frame point p, beyond p by more
+  /// than `tolerance`, meets observed free space and then an observed
+  /// surface within behind_steps steps of half a truncation.
+  EMF_HD bool in_front(const Vec3<S>& p) const {
+    const Vec3<S> dir = normalized(p);
+    const S step = S(0.5) * background.truncation;
+    bool free_space = false;
+    for (int k = 0; k < behind_steps; ++k) {
+      S f;
+      if (!background.sample_observed(T_volume_camera * (p + (tolerance + S(k) * step) * dir), f)) continue;
+      if (!(f > S(0))) return free_space;
+      free_space = true;
+    }
+    return false;
+  }
+
   EMF_HD void operator()(int i) const {
     std::uint8_t mark = 0;
     const Vec3<S>& p = points[i];
     S sdf;
     if (points.inside_border(i, border) && segmentation[i] <= 0 && p.z() > S(0) &&
-        background_association[i] >= S(0.99) && background.sample_observed(T_volume_camera * p, sdf))
-      mark = std::fabs(sdf) > tolerance ? 1 : 0;
+        background_association[i] >= S(0.99)) {
+      if (background.sample_observed(T_volume_camera * p, sdf))
+        mark = std::fabs(sdf) > tolerance ? 1 : 0;
+      else
+        mark = in_front(p) ? 1 : 0;
+    }
     out[i] = mark;
   }
+};
+
+/// MarkUnexplained's marks of the frame into `marked` (allocated as needed)
+/// for pixels inside `border`, with the background's association image
+/// `background_association`.
+template <class S, Backend B>
+void mark_unexplained(const Map<S, B>& map, const Frame<S, B>& frame, const SystemParams<S>& params, int border,
+                      const Image<S, B>& background_association, Image<std::uint8_t, B>& marked) {
+  const B& backend = frame.points.backend();
+  // Every pixel is written below: the contents of a kept image do not matter.
+  if (!marked.same_size(frame.points.width(), frame.points.height()))
+    marked = Image<std::uint8_t, B>(frame.points.width(), frame.points.height(), std::uint8_t(0), backend);
+  map.background.visit([&](const auto& volume) {
+    using View = std::decay_t<decltype(volume.view())>;
+    for_each_index(backend, frame.points.size(),
+                   MarkUnexplained<S, View>{frame.points.view(), frame.segmentation.view(),
+                                            background_association.view(), volume.view(),
+                                            volume.pose().inverse() * map.T_world_camera, border,
+                                            S(params.refind_unexplained_sigmas) * params.likelihood.sigma,
+                                            marked.view().data});
+  });
+}
+
+/// True for a lost object that the rules of this file look for: not lost
+/// in this frame, not of an ignored class, and detected on at least two
+/// detector frames (a false positive is seldom seen twice).
+template <class S, Backend B>
+bool may_come_back(const LostObject<S, B>& l, int frame, const SystemParams<S>& params) {
+  return l.lost_at < frame && !params.ignores(l.object->class_name()) &&
+         l.object->existence_count() >= reidentification::min_detections;
+}
+
+/// The background's weight: the E-step's association, 0 where marked.
+template <class S>
+struct HeldWeight {
+  ImageView<const S> association;
+  ImageView<const std::uint8_t> marked;
+  S* out;
+  EMF_HD void operator()(int i) const { out[i] = marked[i] ? S(0) : association[i]; }
 };
 
 /// 1 for a marked pixel (the count of MarkUnexplained's marks).
@@ -149,7 +221,91 @@ reidentification::DetectionTarget<S, B> target_of(const std::vector<int>& group,
   return t;
 }
 
+/// A group in which no lost object was found (refind_unexplained): the
+/// centroid of its points (world frame), its pixels, the frame, and the ids
+/// of the lost objects tried.
+template <class S>
+struct TriedGroup {
+  Vec3<S> centroid;
+  std::size_t pixels = 0;
+  int frame = 0;
+  std::vector<int> candidates;
+};
+
+/// A group tried that long ago (frames) is tried again whatever it looks
+/// like: the camera has moved on, and a fit from another view may hold.
+inline constexpr int retry_frames = 15;
+/// ... and earlier if it has grown by this share of its pixels, or its
+/// centroid moved further than same_group_distance (metres).
+inline constexpr double retry_growth = 0.1;
+inline constexpr double same_group_distance = 0.05;
+
+/// True when `tried` holds the group (centroid `c`, `pixels`) as tried on
+/// the same candidates within retry_frames frames of `frame`, and it has
+/// not grown by retry_growth since: no lost object was found in it then,
+/// and none will be now (a static thing no detector knows, which the
+/// background does not take in while lost objects are looked for, would
+/// otherwise be fitted to every lost object on every frame).
+template <class S>
+bool tried_before(const std::vector<TriedGroup<S>>& tried, const Vec3<S>& c, std::size_t pixels, int frame,
+                  const std::vector<int>& candidates) {
+  for (const TriedGroup<S>& t : tried)
+    if (frame - t.frame < retry_frames && t.candidates == candidates &&
+        double(norm(t.centroid - c)) <= same_group_distance &&
+        double(pixels) < (1.0 + retry_growth) * double(t.pixels))
+      return true;
+  return false;
+}
+
 }  // namespace detail::unexplained
+
+/// What refind_unexplained keeps between frames: the image of marks, and
+/// the groups in which no lost object was found, so that they are not
+/// fitted again on every frame (detail::unexplained::tried_before).
+template <class S, Backend B>
+struct UnexplainedWorkspace {
+  Image<std::uint8_t, B> marks;
+  std::vector<detail::unexplained::TriedGroup<S>> tried;
+};
+
+/// The background's weights for stage 6 (integrate_models) while a lost
+/// object may come back (params.hold_unexplained): on a frame without
+/// detections (`detector_frame` false) in which some lost object is looked
+/// for (may_come_back), `weights` becomes the E-step's background
+/// association with 0 at every pixel MarkUnexplained marks (the whole
+/// image, no border), and the function returns true; otherwise it returns
+/// false and leaves `weights` alone (the background then fuses with the
+/// E-step's image). Without the hold the background takes in what no model
+/// explains within a few frames, and an object that comes back and stands
+/// still is gone from the marks before refind_unexplained sees
+/// keep_mask_pixels of it: points within the tolerance of the background's
+/// surface (where the object meets what stands behind and under it) are
+/// fused and pull the surface towards it, so that on the next frame more of
+/// it lies within the tolerance, and points in space the background had not
+/// observed become background at once. On detector frames the background
+/// fuses every pixel as before: something that stays unexplained (a thing
+/// no detector knows, put down for good) is still taken in, more slowly.
+/// `marks` (optional) keeps the image of marks between frames.
+template <class S, Backend B>
+bool hold_unexplained(const Map<S, B>& map, const Frame<S, B>& frame, const SystemParams<S>& params,
+                      bool detector_frame, Image<S, B>& weights, Image<std::uint8_t, B>* marks = nullptr) {
+  if (!params.hold_unexplained || detector_frame || !map.started || frame.associations.model_count() < 1)
+    return false;
+  bool any = false;
+  for (const LostObject<S, B>& l : map.lost) any = any || detail::unexplained::may_come_back(l, map.frames, params);
+  if (!any) return false;
+  Image<std::uint8_t, B> local;
+  Image<std::uint8_t, B>& marked = marks ? *marks : local;
+  const Image<S, B>& association = frame.associations.image(0);
+  detail::unexplained::mark_unexplained(map, frame, params, 0, association, marked);
+  const B& backend = association.backend();
+  if (!weights.same_size(association.width(), association.height()))
+    weights = Image<S, B>(association.width(), association.height(), S(0), backend);
+  for_each_index(backend, association.size(),
+                 detail::unexplained::HeldWeight<S>{association.view(), std::as_const(marked).view(),
+                                                    weights.view().data});
+  return true;
+}
 
 /// Stage 9, at the end of a frame after refind_in_view
 /// (params.refind_unexplained_every > 0: on every that many frames): lost
@@ -174,19 +330,21 @@ reidentification::DetectionTarget<S, B> target_of(const std::vector<int>& group,
 /// tracked from the next frame. Not on detector frames, nor after another
 /// object came back this frame (the segmentation and the E-step do not show
 /// those). Its id is added to result.reidentified; returns how many came
-/// back. `marks` (optional) keeps the image of marks between frames.
+/// back. `workspace` (optional) keeps the image of marks between frames
+/// and the groups in which no lost object was found: those are not fitted
+/// again for retry_frames frames unless they grow by retry_growth or the
+/// lost objects looked for change (without it, every group on every frame).
 template <class S, Backend B, class Norm, class Solver>
   requires RobustNorm<Norm, S> && PoseSolver<Solver, S>
 int refind_unexplained(Map<S, B>& map, const Frame<S, B>& frame, const PinholeCamera<S>& camera,
                        const SystemParams<S>& params, const Norm& norm, const Solver& solver, FrameResult& result,
-                       Image<std::uint8_t, B>* marks = nullptr) {
+                       UnexplainedWorkspace<S, B>* workspace = nullptr) {
   if (params.refind_unexplained_every <= 0 || map.frames % params.refind_unexplained_every != 0) return 0;
   // The segmentation and the E-step do not show objects created or brought
   // back this frame: their pixels would be unexplained.
   if (result.detector_frame || !result.reidentified.empty()) return 0;
   const auto is_candidate = [&](const LostObject<S, B>& l) {
-    return l.lost_at < map.frames && !params.ignores(l.object->class_name()) &&
-           l.object->existence_count() >= detail::reidentification::min_detections;
+    return detail::unexplained::may_come_back(l, map.frames, params);
   };
   bool any = false;
   for (const LostObject<S, B>& l : map.lost) any = any || is_candidate(l);
@@ -196,19 +354,11 @@ int refind_unexplained(Map<S, B>& map, const Frame<S, B>& frame, const PinholeCa
   const int min_points = params.keep_mask_pixels_for(width, height);
   const int border = params.visibility_border_for(width);
   const B& backend = frame.points.backend();
-  Image<std::uint8_t, B> local;
-  Image<std::uint8_t, B>& marked = marks ? *marks : local;
-  // Every pixel is written below: the contents of a kept image do not matter.
-  if (!marked.same_size(width, height)) marked = Image<std::uint8_t, B>(width, height, std::uint8_t(0), backend);
-  map.background.visit([&](const auto& volume) {
-    using View = std::decay_t<decltype(volume.view())>;
-    for_each_index(backend, frame.points.size(),
-                   detail::unexplained::MarkUnexplained<S, View>{
-                       frame.points.view(), frame.segmentation.view(),
-                       std::as_const(frame.associations.image(0)).view(), volume.view(),
-                       volume.pose().inverse() * map.T_world_camera, border,
-                       S(params.refind_unexplained_sigmas) * params.likelihood.sigma, marked.view().data});
-  });
+  UnexplainedWorkspace<S, B> local;
+  UnexplainedWorkspace<S, B>& ws = workspace ? *workspace : local;
+  std::erase_if(ws.tried, [&](const auto& t) { return map.frames - t.frame >= detail::unexplained::retry_frames; });
+  Image<std::uint8_t, B>& marked = ws.marks;
+  detail::unexplained::mark_unexplained(map, frame, params, border, frame.associations.image(0), marked);
   const int count = transform_reduce_index(backend, marked.size(), detail::unexplained::CountMarked{std::as_const(marked).view()},
                                            0, thrust::plus<int>());
   if (count < min_points) return 0;
@@ -216,12 +366,18 @@ int refind_unexplained(Map<S, B>& map, const Frame<S, B>& frame, const PinholeCa
   const double now = map.camera_trajectory.empty() ? 0.0 : map.camera_trajectory.back().timestamp;
   const std::vector<std::vector<int>> groups = detail::unexplained::groups_of(
       marked.to_host(), points, width, height, params.object_depth_gap, min_points);
+  std::vector<int> candidates;  // the ids looked for
+  for (const LostObject<S, B>& l : map.lost)
+    if (is_candidate(l)) candidates.push_back(l.object->id());
   int found = 0;
+  RaycastResult<S, B> drawn;
   for (const std::vector<int>& group : groups) {
     if (4 * group.size() > std::size_t(width) * std::size_t(height) || int(map.objects.size()) >= params.max_objects ||
         detail::unexplained::cut_by_border(group, width, height, border))
       continue;
     const auto target = detail::unexplained::target_of<S, B>(group, points, width, height, backend);
+    const Vec3<S> centroid = map.T_world_camera * target.centroid;
+    if (detail::unexplained::tried_before(ws.tried, centroid, group.size(), map.frames, candidates)) continue;
     std::vector<detail::reidentification::CandidateFit<S>> fits;
     for (std::size_t k = 0; k < map.lost.size(); ++k) {
       if (!is_candidate(map.lost[k])) continue;
@@ -236,11 +392,27 @@ int refind_unexplained(Map<S, B>& map, const Frame<S, B>& frame, const PinholeCa
       const double seconds = std::max(now - map.record_of(o.id()).last_timestamp, 0.0);
       if (moved <= double(params.refind_unexplained_speed) * seconds) fits.push_back({int(k), inliers, T});
     }
-    if (!detail::unexplained::unambiguous(fits, params.reidentify_min_inliers, params.reidentify_keep_margin)) continue;
-    const auto fit = detail::reidentification::best_shown_fit(
-        std::move(fits), params.reidentify_min_inliers,
-        [&](int k) -> const ObjectModel<S, B>& { return *map.lost[std::size_t(k)].object; }, frame, target.mask, camera);
-    if (!fit) continue;
+    // The frame must show the fit in the group's pixels and, as far as no
+    // live object covers it, wherever it is drawn: a model turned the wrong
+    // way fits the part of an object in view, and is drawn where the frame
+    // sees through it.
+    const auto shown = [&](const detail::reidentification::CandidateFit<S>& f) {
+      const ObjectModel<S, B>& o = *map.lost[std::size_t(f.candidate)].object;
+      return detail::reidentification::consistent_with_frame(o, f.T_volume_camera, frame, target.mask, camera) &&
+             detail::reidentification::shown_in_view(o, f.T_volume_camera, frame, camera, params, drawn);
+    };
+    const auto fit =
+        detail::unexplained::unambiguous(fits, params.reidentify_min_inliers, params.reidentify_keep_margin)
+            ? detail::reidentification::best_shown_fit(std::move(fits), params.reidentify_min_inliers, shown)
+            : std::nullopt;
+    if (!fit) {
+      // Remembered, so that it is not fitted again until it changes.
+      std::erase_if(ws.tried, [&](const auto& t) {
+        return double(emfusion::norm(t.centroid - centroid)) <= detail::unexplained::same_group_distance;
+      });
+      ws.tried.push_back({centroid, group.size(), map.frames, candidates});
+      continue;
+    }
     ObjectModel<S, B>& obj = map.bring_back(std::size_t(fit->candidate));
     detail::reidentification::move_to_fit(obj, map.T_world_camera, *fit);
     result.found_again(obj.id(), FoundBy::unexplained);
