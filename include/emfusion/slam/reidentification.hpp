@@ -275,6 +275,16 @@ bool consistent_with_frame(const ObjectModel<S, B>& o, const SE3<S>& T_volume_ca
 /// came back in view four times and took pixels of the book and the cup).
 inline constexpr int min_detections = 2;
 
+/// True for a lost object that is looked for without a detection
+/// (refind_in_view, refind_unexplained, hold_unexplained): not lost in
+/// this frame, not of an ignored class, and detected on at least
+/// min_detections detector frames.
+template <class S, Backend B>
+bool may_come_back(const LostObject<S, B>& l, int frame, const SystemParams<S>& params) {
+  return l.lost_at < frame && !params.ignores(l.object->class_name()) &&
+         l.object->existence_count() >= min_detections;
+}
+
 /// One candidate's fit to a detection (fit_to_target): the candidate's
 /// index in the caller's list, the share of the detection's points on its
 /// surface, and T_volume_camera.
@@ -505,8 +515,7 @@ int refind_in_view(Map<S, B>& map, const Frame<S, B>& frame, const PinholeCamera
   int found = 0;
   for (std::size_t k = 0; k < map.lost.size() && int(map.objects.size()) < params.max_objects;) {
     ObjectModel<S, B>& o = *map.lost[k].object;
-    if (map.lost[k].lost_at >= map.frames || params.ignores(o.class_name()) ||
-        o.existence_count() < detail::reidentification::min_detections) {
+    if (!detail::reidentification::may_come_back(map.lost[k], map.frames, params)) {
       ++k;
       continue;
     }

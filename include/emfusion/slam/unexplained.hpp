@@ -115,15 +115,6 @@ void mark_unexplained(const Map<S, B>& map, const Frame<S, B>& frame, const Syst
   });
 }
 
-/// True for a lost object that the rules of this file look for: not lost
-/// in this frame, not of an ignored class, and detected on at least two
-/// detector frames (a false positive is seldom seen twice).
-template <class S, Backend B>
-bool may_come_back(const LostObject<S, B>& l, int frame, const SystemParams<S>& params) {
-  return l.lost_at < frame && !params.ignores(l.object->class_name()) &&
-         l.object->existence_count() >= reidentification::min_detections;
-}
-
 /// The background's weight: the E-step's association, 0 where marked.
 template <class S>
 struct HeldWeight {
@@ -271,9 +262,10 @@ struct UnexplainedWorkspace {
 /// The background's weights for stage 6 (integrate_models) while a lost
 /// object may come back (params.hold_unexplained): on a frame without
 /// detections (`detector_frame` false) in which some lost object is looked
-/// for (may_come_back), `weights` becomes the E-step's background
-/// association with 0 at every pixel MarkUnexplained marks (the whole
-/// image, no border), and the function returns true; otherwise it returns
+/// for (may_come_back, reidentification.hpp), `weights` becomes the
+/// E-step's background association with 0 at every pixel MarkUnexplained
+/// marks (the whole image, no border), and the function returns true;
+/// otherwise it returns
 /// false and leaves `weights` alone (the background then fuses with the
 /// E-step's image). Without the hold the background takes in what no model
 /// explains within a few frames, and an object that comes back and stands
@@ -291,9 +283,10 @@ bool hold_unexplained(const Map<S, B>& map, const Frame<S, B>& frame, const Syst
                       bool detector_frame, Image<S, B>& weights, Image<std::uint8_t, B>* marks = nullptr) {
   if (!params.hold_unexplained || detector_frame || !map.started || frame.associations.model_count() < 1)
     return false;
-  bool any = false;
-  for (const LostObject<S, B>& l : map.lost) any = any || detail::unexplained::may_come_back(l, map.frames, params);
-  if (!any) return false;
+  if (std::none_of(map.lost.begin(), map.lost.end(), [&](const LostObject<S, B>& l) {
+        return detail::reidentification::may_come_back(l, map.frames, params);
+      }))
+    return false;
   Image<std::uint8_t, B> local;
   Image<std::uint8_t, B>& marked = marks ? *marks : local;
   const Image<S, B>& association = frame.associations.image(0);
@@ -344,11 +337,13 @@ int refind_unexplained(Map<S, B>& map, const Frame<S, B>& frame, const PinholeCa
   // back this frame: their pixels would be unexplained.
   if (result.detector_frame || !result.reidentified.empty()) return 0;
   const auto is_candidate = [&](const LostObject<S, B>& l) {
-    return detail::unexplained::may_come_back(l, map.frames, params);
+    return detail::reidentification::may_come_back(l, map.frames, params);
   };
-  bool any = false;
-  for (const LostObject<S, B>& l : map.lost) any = any || is_candidate(l);
-  if (!any || int(map.objects.size()) >= params.max_objects || frame.associations.model_count() < 1) return 0;
+  std::vector<int> candidates;  // the ids looked for
+  for (const LostObject<S, B>& l : map.lost)
+    if (is_candidate(l)) candidates.push_back(l.object->id());
+  if (candidates.empty() || int(map.objects.size()) >= params.max_objects || frame.associations.model_count() < 1)
+    return 0;
   const int width = camera.width, height = camera.height;
   // As many as keep a live object: one found on fewer would be lost again.
   const int min_points = params.keep_mask_pixels_for(width, height);
@@ -366,9 +361,6 @@ int refind_unexplained(Map<S, B>& map, const Frame<S, B>& frame, const PinholeCa
   const double now = map.camera_trajectory.empty() ? 0.0 : map.camera_trajectory.back().timestamp;
   const std::vector<std::vector<int>> groups = detail::unexplained::groups_of(
       marked.to_host(), points, width, height, params.object_depth_gap, min_points);
-  std::vector<int> candidates;  // the ids looked for
-  for (const LostObject<S, B>& l : map.lost)
-    if (is_candidate(l)) candidates.push_back(l.object->id());
   int found = 0;
   RaycastResult<S, B> drawn;
   for (const std::vector<int>& group : groups) {
