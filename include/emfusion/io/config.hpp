@@ -150,6 +150,8 @@ const std::vector<ParameterEntry<S>>& parameter_table() {
       EMF_NUMBER("reidentify_min_inliers", reidentify_min_inliers, "share of a detection on a lost object's surface"),
       EMF_NUMBER("reidentify_keep_margin", reidentify_keep_margin,
                  "share of a detection another fit must add to replace the fit from an object's last pose"),
+      EMF_NUMBER("reidentify_turn_below", reidentify_turn_below,
+                 "a lost object's fit with a lower share of a detection on its surface, or not shown in view, is tried turned too (0: off)"),
       EMF_NUMBER("reidentify_mask_fraction", reidentify_mask_fraction,
                  "a detection re-identifies a lost object with this fraction of min_mask_pixels points of its own"),
       EMF_NUMBER("relocalize_below", relocalize_below,

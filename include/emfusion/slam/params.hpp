@@ -152,6 +152,16 @@ struct SystemParams {
   /// turned; docs/system.md, "Lost objects"). 1: the last pose always wins
   /// when it fits; 0: the best fit wins.
   double reidentify_keep_margin = 0.05;
+  /// When the best fit of a detection from a lost object's last
+  /// orientation puts fewer than this share of its points on the surface,
+  /// or is not shown in view (the model, drawn there, agrees with the
+  /// frame wherever it is drawn), the lost objects are also aligned from
+  /// their last orientation turned by each of the 23 other turns that map
+  /// a cube onto itself; a turned fit shown in view that adds
+  /// reidentify_keep_margin to that share wins (docs/system.md, "Lost
+  /// objects": an object that turned while out of view). 0: the last
+  /// orientation only.
+  double reidentify_turn_below = 0.9;
   /// A detection re-identifies a lost object with at least this fraction
   /// of min_mask_pixels points of its own (creating an object takes all of
   /// them, the paper's 40x40 pixels): the known model, its fit and its
@@ -320,6 +330,8 @@ struct SystemParams {
                     "hidden_moving_seconds must be finite and not negative");
     detail::require(reidentify_keep_margin >= 0 && reidentify_keep_margin <= 1, w,
                     "reidentify_keep_margin must be in [0, 1]");
+    detail::require(reidentify_turn_below >= 0 && reidentify_turn_below <= 1, w,
+                    "reidentify_turn_below must be in [0, 1]");
     detail::require(reidentify_mask_fraction > 0 && reidentify_mask_fraction <= 1, w,
                     "reidentify_mask_fraction must be in (0, 1]");
     detail::require(merge_min_inliers >= 0 && merge_min_inliers <= 1, w, "merge_min_inliers must be in [0, 1]");
