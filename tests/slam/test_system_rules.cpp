@@ -13,7 +13,8 @@
 // seen, an object that passes behind another moves on at its velocity
 // and is found where it comes out, and of the fits of lost objects to a
 // detection the best that the frame shows is taken; a lost object that
-// turned while out of view is found turned.
+// turned while out of view is found turned; marks on either side of a thin
+// band are one group.
 // The two longest (resting, re-identification) run in float only
 // (SystemRuleConfigs, support/configs.hpp).
 #include <algorithm>
@@ -596,6 +597,30 @@ TEST_CASE("Without a class, a group two objects fit about as well is left alone"
   CHECK(unambiguous(std::vector<Fit>{{0, 0.95, id}, {1, 0.58, id}}, 0.6, 0.05));
   CHECK(unambiguous(std::vector<Fit>{{0, 0.5, id}, {1, 0.5, id}}, 0.6, 0.05));
   CHECK(unambiguous(std::vector<Fit>{}, 0.6, 0.05));
+}
+
+TEST_CASE("Marked pixels on either side of a thin unmarked band are one group", "[slam]") {
+  using detail::unexplained::groups_of;
+  // 60x20 pixels: marked at columns 5-24 and 35-54 (a band of 10 between),
+  // all at 1 m, or the right part at 1.5 m.
+  const int w = 60, h = 20;
+  std::vector<std::uint8_t> marked(std::size_t(w * h), 0);
+  std::vector<Vec3<double>> points(marked.size(), vec3(0.0, 0.0, 1.0));
+  for (int v = 0; v < h; ++v)
+    for (int u = 0; u < w; ++u) marked[std::size_t(v * w + u)] = (u >= 5 && u < 25) || (u >= 35 && u < 55);
+  const auto sizes = [&](int bridge) {
+    std::vector<std::size_t> n;
+    for (const auto& g : groups_of(marked, points, w, h, 0.05, 100, bridge)) n.push_back(g.size());
+    return n;
+  };
+  CHECK(sizes(1) == std::vector<std::size_t>{400, 400});  // four neighbours only
+  CHECK(sizes(10) == std::vector<std::size_t>{400, 400});  // the band is 10 wide: 11 steps across
+  CHECK(sizes(11) == std::vector<std::size_t>{800});
+  CHECK(sizes(20) == std::vector<std::size_t>{800});
+  for (int v = 0; v < h; ++v)
+    for (int u = 35; u < 55; ++u) points[std::size_t(v * w + u)] = vec3(0.0, 0.0, 1.5);
+  CHECK(sizes(20) == std::vector<std::size_t>{400, 400});  // not across a step in depth
+  CHECK(groups_of(marked, points, w, h, 0.05, 401, 20).empty());  // each under the minimum
 }
 
 TEST_CASE("A group no lost object was found in is not fitted again until it changes", "[slam]") {

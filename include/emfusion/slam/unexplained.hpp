@@ -130,15 +130,32 @@ struct CountMarked {
   EMF_HD int operator()(int i) const { return int(marked[i]); }
 };
 
-/// The connected groups of marked pixels of a width x height image (four
-/// neighbours, joined where their depths differ by at most `depth_gap`),
-/// each as its pixel indices; those of fewer than `min_pixels` are left out.
+/// How far (pixels at 640 wide, scaled with the image) groups_of joins
+/// marked pixels across unmarked ones: an object standing in view whose
+/// middle the background took in on a detector frame (the hold leaves
+/// those alone) shows as two parts on either side of that band, neither of
+/// keep_mask_pixels (c215-tab900's bottle at frame 350: 1910 of its 3412
+/// pixels marked, split by a band about 15 pixels wide).
+inline constexpr int bridge_pixels_at_640 = 20;
+
+/// The connected groups of marked pixels of a width x height image, each
+/// as its pixel indices; those of fewer than `min_pixels` are left out. A
+/// marked pixel joins its four neighbours and, in each of the four
+/// directions, the first marked pixel 2 to `bridge` pixels away, where
+/// their depths differ by at most `depth_gap`.
 template <class S>
 std::vector<std::vector<int>> groups_of(const std::vector<std::uint8_t>& marked, const std::vector<Vec3<S>>& points,
-                                        int width, int height, S depth_gap, int min_pixels) {
+                                        int width, int height, S depth_gap, int min_pixels, int bridge = 1) {
   std::vector<std::vector<int>> out;
   std::vector<std::uint8_t> seen(marked.size(), 0);
   std::vector<int> stack;
+  const auto join = [&](int i, int j) {
+    if (!seen[std::size_t(j)] && std::fabs(points[std::size_t(j)].z() - points[std::size_t(i)].z()) <= depth_gap) {
+      seen[std::size_t(j)] = 1;
+      stack.push_back(j);
+    }
+  };
+  const int du[4] = {-1, 1, 0, 0}, dv[4] = {0, 0, -1, 1};
   for (int start = 0; start < width * height; ++start) {
     if (!marked[std::size_t(start)] || seen[std::size_t(start)]) continue;
     std::vector<int> group;
@@ -149,14 +166,18 @@ std::vector<std::vector<int>> groups_of(const std::vector<std::uint8_t>& marked,
       stack.pop_back();
       group.push_back(i);
       const int u = i % width, v = i / width;
-      const int next[4] = {u > 0 ? i - 1 : -1, u + 1 < width ? i + 1 : -1, v > 0 ? i - width : -1,
-                           v + 1 < height ? i + width : -1};
-      for (int j : next)
-        if (j >= 0 && marked[std::size_t(j)] && !seen[std::size_t(j)] &&
-            std::fabs(points[std::size_t(j)].z() - points[std::size_t(i)].z()) <= depth_gap) {
-          seen[std::size_t(j)] = 1;
-          stack.push_back(j);
-        }
+      const auto at = [&](int d, int k) {  // pixel k steps in direction d, -1 outside the image
+        const int uk = u + k * du[d], vk = v + k * dv[d];
+        return uk < 0 || vk < 0 || uk >= width || vk >= height ? -1 : vk * width + uk;
+      };
+      for (int d = 0; d < 4; ++d)
+        if (const int j = at(d, 1); j >= 0 && marked[std::size_t(j)]) join(i, j);
+      for (int d = 0; d < 4; ++d)
+        for (int k = 2, j; k <= bridge && (j = at(d, k)) >= 0; ++k)
+          if (marked[std::size_t(j)]) {
+            join(i, j);
+            break;
+          }
     }
     if (int(group.size()) >= min_pixels) out.push_back(std::move(group));
   }
@@ -359,8 +380,9 @@ int refind_unexplained(Map<S, B>& map, const Frame<S, B>& frame, const PinholeCa
   if (count < min_points) return 0;
   const std::vector<Vec3<S>> points = frame.points.to_host();
   const double now = map.camera_trajectory.empty() ? 0.0 : map.camera_trajectory.back().timestamp;
-  const std::vector<std::vector<int>> groups = detail::unexplained::groups_of(
-      marked.to_host(), points, width, height, params.object_depth_gap, min_points);
+  const std::vector<std::vector<int>> groups =
+      detail::unexplained::groups_of(marked.to_host(), points, width, height, params.object_depth_gap, min_points,
+                                     std::max(1, detail::unexplained::bridge_pixels_at_640 * width / 640));
   int found = 0;
   RaycastResult<S, B> drawn;
   for (const std::vector<int>& group : groups) {
