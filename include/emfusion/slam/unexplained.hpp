@@ -329,7 +329,8 @@ bool hold_unexplained(const Map<S, B>& map, const Frame<S, B>& frame, const Syst
 /// likelihood.sigma, on no live object, inside the visibility border) are
 /// counted on the backend; only where there are at least keep_mask_pixels
 /// of them (what keeps a live object visible) are they and the points read
-/// on the host and grouped (depth-continuous within object_depth_gap). Each
+/// on the host and grouped (groups_of: depth-continuous within object_depth_gap,
+/// across unmarked bands up to bridge_pixels_at_640 wide). Each
 /// group of at least keep_mask_pixels and at most a quarter of the image,
 /// not cut by the image border (cut_by_border), is a target for every lost
 /// object, of any class, detected on at least two
