@@ -190,10 +190,10 @@ std::optional<std::pair<double, SE3<S>>> fit_from(const ObjectModel<S, B>& o, co
                                                   const SystemParams<S>& params, const Norm& norm,
                                                   const Solver& solver, int frames_lost, const SE3<S>& start) {
   const auto& volume = o.volume();
+  const SdfAlignmentParams<S> align = alignment_params(params, params.object_integration.max_weight);
   SolveReport report;
-  const SE3<S> T =
-      align_in_volume(volume, frame.points, &target.mask, start, scaled_norm(norm, volume.voxel_size()),
-                      alignment_params(params, params.object_integration.max_weight), solver, &report);
+  const SE3<S> T = align_in_volume(volume, frame.points, &target.mask, start, scaled_norm(norm, volume.voxel_size()),
+                                   align, solver, &report);
   if (!report.converged() || report.terms < double(params.min_object_terms)) return std::nullopt;
   if (frames_lost > 0) {
     // The move from the last pose: of the box centre, and the turn.
@@ -206,7 +206,7 @@ std::optional<std::pair<double, SE3<S>>> fit_from(const ObjectModel<S, B>& o, co
             moved, turned))
       return std::nullopt;
   }
-  SdfAlignmentParams<S> count = alignment_params(params, params.object_integration.max_weight);
+  SdfAlignmentParams<S> count = align;
   count.use_map_confidence = false;
   const NormalEquations6 n = linearize(frame.points.backend(), make_sdf_alignment(volume, frame.points, &target.mask, count),
                                        OffSurfaceCount<S>{params.huber_voxels * volume.voxel_size()}, T);
@@ -330,6 +330,19 @@ bool consistent_with_frame(const ObjectModel<S, B>& o, const SE3<S>& T_volume_ca
   return n.drawn > 0 && 2 * n.drawn >= n.masked && 2 * n.agree >= n.drawn;
 }
 
+/// Whether the frame shows object `o` placed at T_volume_camera both in
+/// the pixels `mask` (consistent_with_frame) and wherever its model is
+/// drawn (shown_in_view; `drawn` keeps the cast's images between calls):
+/// the test of a fit found without the pose it was lost in to go on from
+/// (refind_unexplained, and reidentify's turned fits).
+template <class S, Backend B>
+bool shown_in_mask_and_view(const ObjectModel<S, B>& o, const SE3<S>& T_volume_camera, const Frame<S, B>& frame,
+                            const Image<S, B>& mask, const PinholeCamera<S>& camera, const SystemParams<S>& params,
+                            RaycastResult<S, B>& drawn) {
+  return consistent_with_frame(o, T_volume_camera, frame, mask, camera) &&
+         shown_in_view(o, T_volume_camera, frame, camera, params, drawn);
+}
+
 /// Detector frames an object must have been detected in to be looked for
 /// without a detection (refind_in_view, refind_unexplained), or to be
 /// moved onto a detection it was not matched to (relocalize_objects): a false
@@ -435,12 +448,14 @@ std::optional<NewObjectWeights<S, B>> reidentify(Map<S, B>& map, const Frame<S, 
   if (!target) return std::nullopt;
   const auto frames_lost = [&](std::size_t k) { return std::max(map.frames - map.lost[k].lost_at, 1); };
   const auto object_of = [&](int k) -> const ObjectModel<S, B>& { return *map.lost[std::size_t(k)].object; };
+  std::vector<std::size_t> of_class;  // the lost objects of the detection's class
+  for (std::size_t k = 0; k < map.lost.size(); ++k)
+    if (map.lost[k].object->class_name() == inst.class_name) of_class.push_back(k);
   std::vector<detail::reidentification::CandidateFit<S>> fits;
-  for (std::size_t k = 0; k < map.lost.size(); ++k) {
-    const ObjectModel<S, B>& o = *map.lost[k].object;
-    if (o.class_name() != inst.class_name) continue;
-    const auto [inliers, T] = detail::reidentification::fit_to_target(o, *target, frame, map.T_world_camera, params,
-                                                                       norm, solver, frames_lost(k));
+  for (const std::size_t k : of_class) {
+    const auto [inliers, T] = detail::reidentification::fit_to_target(*map.lost[k].object, *target, frame,
+                                                                       map.T_world_camera, params, norm, solver,
+                                                                       frames_lost(k));
     fits.push_back({int(k), inliers, T});
   }
   auto fit = detail::reidentification::best_shown_fit(fits, params.reidentify_min_inliers, object_of, frame,
@@ -458,20 +473,16 @@ std::optional<NewObjectWeights<S, B>> reidentify(Map<S, B>& map, const Frame<S, 
   if (!fits.empty() && params.reidentify_turn_below > 0 &&
       !(fit && fit->inliers >= params.reidentify_turn_below && shown_everywhere(*fit))) {
     std::vector<detail::reidentification::CandidateFit<S>> turned;
-    for (std::size_t k = 0; k < map.lost.size(); ++k) {
-      const ObjectModel<S, B>& o = *map.lost[k].object;
-      if (o.class_name() != inst.class_name) continue;
-      for (const auto& [inliers, T] : detail::reidentification::turned_fits(o, *target, frame, map.T_world_camera,
-                                                                           params, norm, solver, frames_lost(k)))
+    for (const std::size_t k : of_class)
+      for (const auto& [inliers, T] : detail::reidentification::turned_fits(
+               *map.lost[k].object, *target, frame, map.T_world_camera, params, norm, solver, frames_lost(k)))
         turned.push_back({int(k), inliers, T});
-    }
     const double to_beat = fit ? fit->inliers + params.reidentify_keep_margin : 0.0;
     if (auto better = detail::reidentification::best_shown_fit(
             std::move(turned), std::max(params.reidentify_min_inliers, to_beat),
             [&](const detail::reidentification::CandidateFit<S>& f) {
-              return shown_everywhere(f) &&
-                     detail::reidentification::consistent_with_frame(object_of(f.candidate), f.T_volume_camera,
-                                                                     frame, target->mask, camera);
+              return detail::reidentification::shown_in_mask_and_view(object_of(f.candidate), f.T_volume_camera,
+                                                                       frame, target->mask, camera, params, drawn);
             }))
       fit = better;
   }

@@ -412,9 +412,9 @@ int refind_unexplained(Map<S, B>& map, const Frame<S, B>& frame, const PinholeCa
     // way fits the part of an object in view, and is drawn where the frame
     // sees through it.
     const auto shown = [&](const detail::reidentification::CandidateFit<S>& f) {
-      const ObjectModel<S, B>& o = *map.lost[std::size_t(f.candidate)].object;
-      return detail::reidentification::consistent_with_frame(o, f.T_volume_camera, frame, target.mask, camera) &&
-             detail::reidentification::shown_in_view(o, f.T_volume_camera, frame, camera, params, drawn);
+      return detail::reidentification::shown_in_mask_and_view(*map.lost[std::size_t(f.candidate)].object,
+                                                               f.T_volume_camera, frame, target.mask, camera, params,
+                                                               drawn);
     };
     const auto fit =
         detail::unexplained::unambiguous(fits, params.reidentify_min_inliers, params.reidentify_keep_margin)
