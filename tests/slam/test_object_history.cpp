@@ -47,6 +47,10 @@ TEST_CASE("Object histories: created, tracked, retried, lost, found again, given
   r = frame(1);  // object 2 hidden: moved on, neither tracked nor refused
   r.object_status = {status(2, TrackingOutcome::moved_on, 1, false)};
   h.add(r, map);
+  r = frame(1);  // object 2's refused solve taken as confirmed (confirm_jump_frames): tracked
+  r.object_status = {status(2, TrackingOutcome::tracked, 1, false)};
+  r.object_status[0].confirmed = true;
+  h.add(r, map);
   // Object 1 is deleted as not visible and kept as lost; 2 by the existence rule.
   r = frame(2);
   r.deleted = {1, 2};
@@ -73,9 +77,11 @@ TEST_CASE("Object histories: created, tracked, retried, lost, found again, given
   CHECK(a.tracked == 1);
   CHECK(a.retried == 1);
   CHECK(a.from_prediction == 1);
+  CHECK(a.confirmed == 0);
   CHECK(b.refused == 1);
   CHECK(b.moved_on == 1);
-  CHECK(b.tracked == 0);
+  CHECK(b.tracked == 1);
+  CHECK(b.confirmed == 1);
   CHECK(b.retried == 1);
   REQUIRE(a.events.size() == 5);
   CHECK(a.events[0].kind == ObjectEventKind::created);

@@ -8,7 +8,8 @@
 // matched only where the frame shows an object, what no model explains kept
 // out of the background while a lost object is looked for (and a point in
 // space the background never saw unexplained only in front of a surface it
-// saw), and two models of one object merged; then the full system with a
+// saw), two models of one object merged, and an object's refused solves
+// taken when they agree from frame to frame; then the full system with a
 // likelihood, a norm and a solver defined here, as a user would.
 #include <cmath>
 #include <cstdint>
@@ -973,6 +974,78 @@ TEMPLATE_LIST_TEST_CASE("Stages alone: tracking from a motion prediction, the re
   const std::vector<PoseStarts<S>> none = predict_objects(m.map, 0.2, params);
   CHECK_FALSE(none[0].predicted);
   CHECK(apart(object.pose().translation(), P1.template cast<S>().translation()) == 0);
+}
+
+TEMPLATE_LIST_TEST_CASE("Stages alone: an object's refused solves that agree on consecutive frames are taken",
+                        "[slam]", emfusion::test::HeavyConfigs) {
+  using S = typename TestType::Scalar;
+  using B = typename TestType::Backend;
+  OneFrameMap<S, B> m;
+  REQUIRE(m.map.objects.size() == 1);
+  PaperLikelihood<S> likelihood;
+  likelihood.params = m.s.params.likelihood;
+  preprocess(m.depth, m.s.camera, m.s.params, m.frame);
+  ObjectModel<S, B>& object = *m.map.objects[0];
+  const SE3<S> truth = object.pose();
+  // The object's pose 2.5 cm off the box it was made from; every solve
+  // brings it back, further than a bound of 1 cm a frame allows.
+  const SE3<S> off = SE3<S>::translation(vec3(S(0.025), S(0), S(0))) * truth;
+  const auto apart = [](const SE3<S>& a, const SE3<S>& b) { return double(norm(a.translation() - b.translation())); };
+  SystemParams<S> params = m.s.params;
+  params.max_object_motion.translation = S(0.01);
+  const ObjectRecord& record = m.map.record_of(object.id());
+  // One frame's solve from `off` at frame `frame`; the object stays where the frame leaves it.
+  const auto track_at = [&](int frame) {
+    m.map.frames = frame;
+    associate(m.map, m.frame, likelihood, params);
+    const std::vector<PoseTrack> t = track_objects(m.map, m.frame, params, HuberNorm<S>{S(2)}, LevenbergMarquardt{});
+    REQUIRE(t.size() == 1);
+    return t[0];
+  };
+  for (const int confirm : {0, 2, 3}) {
+    CAPTURE(confirm);
+    params.confirm_jump_frames = confirm;
+    object.set_pose(off);
+    const PoseTrack first = track_at(10);
+    CHECK(first.outcome == TrackingOutcome::jump_rejected);
+    CHECK_FALSE(first.confirmed);
+    CHECK(first.step.translation > 0.015);
+    CHECK(record.refused_run == 1);
+    CHECK(apart(object.pose(), off) == 0);
+    const PoseTrack second = track_at(11);
+    if (confirm == 2) {
+      CHECK(second.outcome == TrackingOutcome::tracked);
+      CHECK(second.confirmed);
+      CHECK(apart(object.pose(), truth) < 0.005);
+      CHECK(record.refused_run == 0);
+    } else {
+      CHECK(second.outcome == TrackingOutcome::jump_rejected);
+      CHECK(record.refused_run == 2);
+      CHECK(apart(object.pose(), off) == 0);
+      const PoseTrack third = track_at(12);
+      CHECK(third.outcome == (confirm == 3 ? TrackingOutcome::tracked : TrackingOutcome::jump_rejected));
+      CHECK(third.confirmed == (confirm == 3));
+    }
+  }
+  // A run is of consecutive frames: after a frame without a refused solve
+  // it starts again.
+  params.confirm_jump_frames = 2;
+  object.set_pose(off);
+  CHECK(track_at(20).outcome == TrackingOutcome::jump_rejected);
+  CHECK(track_at(22).outcome == TrackingOutcome::jump_rejected);
+  CHECK(record.refused_run == 1);
+  // ... and of solves that agree: one further than the bound from the last
+  // refused solve starts it again too.
+  m.map.record_of(object.id()).refused_pose =
+      (SE3<S>::translation(vec3(S(0), S(0.03), S(0))) * truth).template cast<double>();
+  CHECK(track_at(23).outcome == TrackingOutcome::jump_rejected);
+  CHECK(record.refused_run == 1);
+  CHECK(track_at(24).outcome == TrackingOutcome::tracked);
+  CHECK(apart(object.pose(), truth) < 0.005);
+
+  SystemParams<S> bad = m.s.params;
+  bad.confirm_jump_frames = -1;
+  CHECK_THROWS_WITH(bad.validate(), EMF_CONTAINS("confirm_jump_frames must not be negative"));
 }
 
 TEMPLATE_LIST_TEST_CASE("Every object's pixel counts in one pass equal each object's own reduction", "[slam]",

@@ -119,6 +119,8 @@ const std::vector<ParameterEntry<S>>& parameter_table() {
                  "metres per frame; an object solve moving further is refused"),
       EMF_NUMBER("max_object_rotation_degrees", max_object_motion.rotation_degrees,
                  "degrees per frame; an object solve turning further is refused"),
+      EMF_INTEGER("confirm_jump_frames", confirm_jump_frames,
+                  "an object solve refused by the motion bound is taken when this many consecutive frames' refused solves agree (0: never)"),
       EMF_INTEGER("lm_max_iterations", lm.max_iterations, "Levenberg-Marquardt iterations"),
       EMF_NUMBER("lm_tau", lm.tau, "Levenberg-Marquardt initial damping factor"),
       EMF_NUMBER("lm_eps1", lm.eps1, "stop when the gradient falls below"),

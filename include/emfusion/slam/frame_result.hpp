@@ -95,6 +95,9 @@ struct PoseTrack {
   SolveReport report;
   bool from_prediction = false;  ///< the solve taken started at the motion prediction
   int attempts = 0;              ///< solves run: 2 when the first was not tracked and was retried
+  /// Refused by the motion bound but taken: the last of
+  /// SystemParams::confirm_jump_frames refused solves that agree.
+  bool confirmed = false;
 };
 
 /// The pixels of the depth image a frame received, by kind. Only `valid`
@@ -118,6 +121,7 @@ struct ObjectStatus {
   PoseStep step;                  ///< the motion its solve proposed (world frame, object origin)
   bool from_prediction = false;   ///< the solve taken started at the motion prediction (PoseTrack)
   int attempts = 0;               ///< solves run (2: retried from the other start)
+  bool confirmed = false;         ///< refused by the motion bound, taken as confirmed (PoseTrack)
   int rendered_pixels = 0;        ///< rendered pixels inside the visibility border
   int associated_pixels = 0;      ///< pixels inside the border whose association to it exceeds 0.5
   int visible_pixels = 0;         ///< the larger of the two: what the visibility rule compares

@@ -347,6 +347,7 @@ ObjectStatus object_status(const Map<S, B>& map, const Frame<S, B>& frame, int k
     status.step = t.step;
     status.from_prediction = t.from_prediction;
     status.attempts = t.attempts;
+    status.confirmed = t.confirmed;
   }
   status.rendered_pixels = px.rendered_inner;
   status.associated_pixels = px.associated_inner;

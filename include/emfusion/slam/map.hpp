@@ -38,6 +38,12 @@ struct ObjectRecord {
   /// While it is held hidden behind others (hold_occluded_objects): the
   /// time of the last frame it was tracked in; NaN otherwise.
   double hidden_since = std::numeric_limits<double>::quiet_NaN();
+  /// Its solves refused by the motion bound on consecutive frames, each
+  /// within the bound of the one before (SystemParams::confirm_jump_frames):
+  /// how many, the frame of the last, and the pose it solved (world).
+  int refused_run = 0;
+  int refused_frame = -1;
+  SE3<double> refused_pose{};
 };
 
 /// An object deleted as not visible, kept for re-identification

@@ -54,6 +54,9 @@ struct ObjectHistory {
   int moved_on = 0;                 ///< frames it was hidden behind a nearer surface and moved on, not solved
   int retried = 0;                  ///< frames a first solve was refused and run again from the other start
   int from_prediction = 0;          ///< frames the solve taken started at the motion prediction
+  /// Frames its solve, refused by the motion bound, was taken as the last
+  /// of refused solves that agree (SystemParams::confirm_jump_frames).
+  int confirmed = 0;
 };
 
 /// Collects ObjectHistory from each frame: call add() after every
@@ -73,6 +76,7 @@ class ObjectHistories {
       else if (s.tracking != TrackingOutcome::not_tracked) ++h.refused;
       h.retried += s.attempts > 1;
       h.from_prediction += s.tracking == TrackingOutcome::tracked && s.from_prediction;
+      h.confirmed += s.tracking == TrackingOutcome::tracked && s.confirmed;
     }
     for (int id : r.created) event(id, ObjectEventKind::created);
     for (std::size_t k = 0; k < r.reidentified.size(); ++k) {

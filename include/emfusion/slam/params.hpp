@@ -104,6 +104,15 @@ struct SystemParams {
   /// that moves further is refused (FrameResult reports jump_rejected).
   MotionBound<S> max_camera_motion{};
   MotionBound<S> max_object_motion{};
+  /// An object's solve refused by max_object_motion is taken after all
+  /// when it is the last of this many consecutive frames' refused solves,
+  /// each within max_object_motion of the one before (0: never): solves
+  /// that agree with each other from frame to frame find the object, and
+  /// the pose they move away from is what is wrong (an object that fell
+  /// behind in a fast turn, or was found again at a pose a few degrees or
+  /// centimetres off, would otherwise stay there while every later solve is
+  /// refused; track_objects, docs/system.md "Refused solves that agree").
+  int confirm_jump_frames = 2;
 
   // Association (eq. 5/7).
   LikelihoodParams<S> likelihood{};
@@ -326,6 +335,7 @@ struct SystemParams {
                     "refind_unexplained_speed must be positive and finite");
     detail::require(refind_moving_seconds >= 0 && std::isfinite(double(refind_moving_seconds)), w,
                     "refind_moving_seconds must be finite and not negative");
+    detail::require(confirm_jump_frames >= 0, w, "confirm_jump_frames must not be negative");
     detail::require(hidden_moving_seconds >= 0 && std::isfinite(double(hidden_moving_seconds)), w,
                     "hidden_moving_seconds must be finite and not negative");
     detail::require(reidentify_keep_margin >= 0 && reidentify_keep_margin <= 1, w,

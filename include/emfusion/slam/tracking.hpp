@@ -362,10 +362,27 @@ std::vector<PoseTrack> track_objects(Map<S, B>& map, const Frame<S, B>& frame, c
     if (from.predicted) in.predicted = in_volume(k, *from.predicted);
     return std::pair{from, in};
   };
+  // Refused solves that agree (SystemParams::confirm_jump_frames): the
+  // run of them this frame's solve continues, and the pose it solved.
+  std::vector<int> refused_run(n, 0);
+  std::vector<SE3<S>> refused_pose(n);
   const auto judge = [&](std::size_t k, const PoseStarts<S>& from, const SE3<S>& T_volume_camera, PoseTrack& t) {
     const SE3<S> T = to_world(k, T_volume_camera);
     t.step = step_between(from.previous, T);
     t.outcome = tracking_outcome(t.report, double(params.min_object_terms), T, t.step, params.max_object_motion);
+    t.confirmed = false;
+    refused_run[k] = 0;
+    if (t.outcome != TrackingOutcome::jump_rejected) return;
+    const ObjectRecord& r = map.record_of(map.objects[k]->id());
+    const PoseStep since = step_between(r.refused_pose, T.template cast<double>());
+    const bool continues =
+        r.refused_frame == map.frames - 1 && !params.max_object_motion.exceeded_by(since.translation, since.rotation);
+    refused_run[k] = continues ? r.refused_run + 1 : 1;
+    refused_pose[k] = T;
+    if (params.confirm_jump_frames > 0 && refused_run[k] >= params.confirm_jump_frames) {
+      t.outcome = TrackingOutcome::tracked;
+      t.confirmed = true;
+    }
   };
   if constexpr (solved_in_batches<Solver>) {
     using Terms = sdf_alignment_terms_t<S, TsdfVolume<S, B>>;
@@ -425,6 +442,12 @@ std::vector<PoseTrack> track_objects(Map<S, B>& map, const Frame<S, B>& frame, c
   }
   for (std::size_t k = 0; k < n; ++k) {
     ObjectModel<S, B>& o = *map.objects[k];
+    ObjectRecord& r = map.record_of(o.id());
+    r.refused_run = tracks[k].outcome == TrackingOutcome::jump_rejected ? refused_run[k] : 0;
+    if (r.refused_run > 0) {
+      r.refused_frame = map.frames;
+      r.refused_pose = refused_pose[k].template cast<double>();
+    }
     if (tracks[k].outcome == TrackingOutcome::tracked) o.set_pose(T_world_object[k]);
     else if (starts && (*starts)[k].predicted) o.restore_pose((*starts)[k].previous);  // undo the prediction
   }
