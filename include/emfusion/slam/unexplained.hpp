@@ -204,7 +204,10 @@ bool unambiguous(const std::vector<reidentification::CandidateFit<S>>& fits, dou
 /// border's edge (the outermost pixels MarkUnexplained marks): the image
 /// cuts the object it shows, and the part in view fits a lost object at a
 /// wrong pose as well as at the right one (on c215 a car coming back across
-/// the border was placed 24 cm off). It is looked for once wholly in view.
+/// the border was placed 24 cm off), or fits another lost object better
+/// than its own (on c214, on the H200, a mug coming back across the border
+/// was taken as a lost round box 48 cm away). refind_unexplained looks in
+/// such a group only while one lost object is looked for.
 inline bool cut_by_border(const std::vector<int>& group, int width, int height, int border) {
   std::size_t edge = 0;
   for (int i : group) {
@@ -331,9 +334,10 @@ bool hold_unexplained(const Map<S, B>& map, const Frame<S, B>& frame, const Syst
 /// of them (what keeps a live object visible) are they and the points read
 /// on the host and grouped (groups_of: depth-continuous within object_depth_gap,
 /// across unmarked bands up to bridge_pixels_at_640 wide). Each
-/// group of at least keep_mask_pixels and at most a quarter of the image,
-/// not cut by the image border (cut_by_border), is a target for every lost
-/// object, of any class, detected on at least two
+/// group of at least keep_mask_pixels and at most a quarter of the image
+/// (cut by the image border, cut_by_border, only while one lost object is
+/// looked for) is a target for every lost object, of any class, detected
+/// on at least two
 /// detector frames (min_detections): aligned to it as re-identification
 /// aligns (fit_to_target), a fit that moves the object's box centre further
 /// from where it was last tracked than refind_unexplained_speed times the
@@ -388,7 +392,7 @@ int refind_unexplained(Map<S, B>& map, const Frame<S, B>& frame, const PinholeCa
   RaycastResult<S, B> drawn;
   for (const std::vector<int>& group : groups) {
     if (4 * group.size() > std::size_t(width) * std::size_t(height) || int(map.objects.size()) >= params.max_objects ||
-        detail::unexplained::cut_by_border(group, width, height, border))
+        (candidates.size() > 1 && detail::unexplained::cut_by_border(group, width, height, border)))
       continue;
     const auto target = detail::unexplained::target_of<S, B>(group, points, width, height, backend);
     const Vec3<S> centroid = map.T_world_camera * target.centroid;
