@@ -320,7 +320,11 @@ PoseTrack track_camera(Map<S, B>& map, const Frame<S, B>& frame, const SystemPar
 /// k's terms weighted by frame.associations.image(k + 1), from `starts`
 /// (predict_objects; without them, from the objects' poses); sets each
 /// object's pose to the solved one when its outcome is `tracked`, else puts
-/// back its previous pose (restore_pose). Returns one PoseTrack per object, in Map::objects
+/// back its previous pose (restore_pose). A solve refused by
+/// max_object_motion is taken (`tracked`, PoseTrack::confirmed) when it
+/// ends a run of params.confirm_jump_frames consecutive frames' refused
+/// solves, each within the bound of the one before (the run lives in the
+/// object's ObjectRecord). Returns one PoseTrack per object, in Map::objects
 /// order. `norm` is in voxels of each object. With the library's
 /// LevenbergMarquardt the objects are solved as one batch (track_in_volumes:
 /// each iteration one pass over all their terms, and on CUDA no host in the
