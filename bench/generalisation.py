@@ -4,7 +4,8 @@
 Generates dynamic RGB-D sequences with the shared generator (shared/tools/dyngen.py): fully
 synthetic rooms and composites on redkitchen_300 (also 'there and back' ones, see
 bench/there_and_back.py), with other seeds, object mixes, speeds up to the generator's limits,
-missed and false detections. Runs the app on each, then scores the runs against the ground
+missed and false detections; and writes the app's own built-in scenes (synthetic:room,
+synthetic:corridor) as sequences of the same kind with `emfusion export`. Runs the app on each, then scores the runs against the ground
 truth and prints a table and a PASS/FAIL summary per target. docs/benchmarks.md has the
 commands, the sequence list and the metric definitions.
 
@@ -12,7 +13,7 @@ Steps (subcommands):
   list      the sequences (name, kind, generator command)
   generate  make the sequences that are missing (needs numpy, scipy, opencv: Debian's
             python3-numpy python3-scipy python3-opencv; installed with apt-get when missing and
-            root); also writes <seq>/bench_labels.json, the per-frame label areas and detections
+            root; the built-in scenes need the app, --app); also writes <seq>/bench_labels.json, the per-frame label areas and detections
             the report needs, so that run and report need numpy only
   export    copy generated sequences without colour and ground-truth masks (--to DIR), for a
             machine that cannot generate (run and report there with --work DIR)
@@ -75,6 +76,12 @@ def S(name, frames, seed, objects, **kw):
     return d
 
 
+def B(name, scene, frames):
+    """One of the app's built-in scenes, written by `emfusion export` with its simulated detector
+    (its ground truth, masks and labels as a generated sequence's): scored as a synthetic room."""
+    return dict(name=name, kind='synthetic', scene=scene, frames=frames)
+
+
 def C(name, frames, seed, objects, base='redkitchen_300', **kw):
     d = dict(name=name, kind='composite', frames=frames, seed=seed, objects=objects, base=base)
     d.update(kw)
@@ -101,6 +108,10 @@ SEQUENCES = [
     C('c214-tab600', '0:600', 214, 'car:toy_car,cup:mug,book:round_box', base='tab600'),
     C('c215-tab900', '0:900', 215, 'teddy_bear:sphere,car:toy_car,bottle:capsule', base='tab900',
       p_miss=0.2, p_fp=0.1),
+    # The app's own scenes: the room of the README's first command, and the corridor (an 11 m
+    # walk past four movers; the young objects' border hold was made on it, docs/decisions.md).
+    B('room', 'synthetic:room', 300),
+    B('corridor', 'synthetic:corridor', 600),
 ]
 
 # --quick: short sequences that check the whole pipeline in minutes on a CPU (the third one
@@ -120,6 +131,8 @@ def log(*a):
 
 def seq_params(s):
     """Everything that decides the generated frames (the cache key)."""
+    if s.get('scene'):
+        return dict(kind=s['kind'], scene=s['scene'], frames=s['frames'])
     return dict(kind=s['kind'], frames=s['frames'], seed=s['seed'], objects=s['objects'],
                 base=s.get('base'), det_every=s.get('det_every', 30), p_miss=s.get('p_miss', 0.1),
                 p_fp=s.get('p_fp', 0.05))
@@ -152,6 +165,32 @@ def dyngen_command(s, out, base, jobs):
     if p['kind'] == 'composite':
         cmd[3:3] = ['--base', base]
     return cmd
+
+
+def export_command(app, s, out):
+    """The app's export of a built-in scene (B)."""
+    return [app, 'export', s['scene'], out, '--max-frames', str(s['frames'])]
+
+
+def generation_command(args, s, out):
+    """What makes sequence s in `out`: the generator, or the app for a built-in scene."""
+    if s.get('scene'):
+        return export_command(args.app, s, out)
+    base = base_dir(args.work, s['base']) if s['kind'] == 'composite' else None
+    return dyngen_command(s, out, base, args.gen_jobs)
+
+
+def sequence_info(seq):
+    """The objects in label order and the detector's period: the generator's dyngen.json, or the
+    scene.json of `emfusion export` (a built-in scene)."""
+    for name in ('dyngen.json', 'scene.json'):
+        p = os.path.join(seq, name)
+        if os.path.isfile(p):
+            try:
+                return json.load(open(p))
+            except ValueError as e:
+                raise SystemExit('%s: not valid JSON: %s' % (p, e))
+    raise SystemExit('%s: neither dyngen.json nor scene.json: not a generated sequence' % seq)
 
 
 def ensure_generator_packages():
@@ -199,7 +238,7 @@ def write_labels_summary(seq):
     detector reported. Needs cv2; the report then needs numpy only."""
     import cv2
     import numpy as np
-    info = json.load(open(os.path.join(seq, 'dyngen.json')))
+    info = sequence_info(seq)
     names = [o['name'] for o in info['objects']]
     gt_rows = read_list(os.path.join(seq, 'masks_gt', 'masks.txt'))
     det_rows = {r[0]: r for r in read_list(os.path.join(seq, 'masks', 'masks.txt'))}
@@ -234,7 +273,9 @@ def generate(args, seqs):
             log('[generate] %s: cached in %s' % (s['name'], out))
             continue
         if not done:
-            base = None
+            if s.get('scene') and not os.path.isfile(args.app):
+                raise SystemExit('[generate] %s: the built-in scene is written by the app, not found: %s '
+                                 '(build it, or pass --app)' % (s['name'], args.app))
             if s['kind'] == 'composite':
                 base = base_dir(args.work, s['base'])
                 if s['base'] != 'redkitchen_300' and not os.path.isfile(os.path.join(base, 'groundtruth.txt')):
@@ -246,7 +287,7 @@ def generate(args, seqs):
             if os.path.isdir(out):
                 subprocess.run(['rm', '-rf', '--', out], check=True)   # a half-written earlier try
             os.makedirs(out)
-            cmd = dyngen_command(s, out, base, args.gen_jobs)
+            cmd = generation_command(args, s, out)
             log('[generate] %s: %s' % (s['name'], ' '.join(shlex.quote(c) for c in cmd)))
             t0 = time.time()
             with open(os.path.join(out, 'bench_generate.log'), 'w') as lf:
@@ -276,7 +317,7 @@ def labels_summary(seq):
 
 # What run and report read from a generated sequence: no rgb/ (the app tracks on depth and reads
 # a sequence without colour) and no masks_gt/ (bench_labels.json holds what the report needs).
-EXPORT_FILES = ['depth.txt', 'calibration.txt', 'groundtruth.txt', 'dyngen.json', 'bench_labels.json',
+EXPORT_FILES = ['depth.txt', 'calibration.txt', 'groundtruth.txt', 'dyngen.json', 'scene.json', 'bench_labels.json',
                 'bench_params.json', 'README.txt']
 EXPORT_DIRS = ['depth', 'masks', 'groundtruth_objects']
 
@@ -614,7 +655,7 @@ def load_run(seq, out):
     objects, estimates (merged ones left out) and their classes."""
     import numpy as np
     labels = json.load(open(os.path.join(seq, 'bench_labels.json')))
-    info = json.load(open(os.path.join(seq, 'dyngen.json')))
+    info = sequence_info(seq)
     frame_t = np.array([float(fr['t']) for fr in labels['frames']])
     fps = 1.0 / float(np.median(np.diff(frame_t))) if len(frame_t) > 1 else 30.0
     gt_cam = read_tum(os.path.join(seq, 'groundtruth.txt'))
@@ -1068,6 +1109,29 @@ def selftest():
             raise AssertionError('compare accepted a list')
         except SystemExit as e:
             assert p in str(e) and 'not a report' in str(e), e
+    # a built-in scene: its own cache key, its export command, and its scene.json read as the
+    # generator's dyngen.json (the objects in label order, the detector's period)
+    room = B('r', 'synthetic:room', 300)
+    assert seq_params(room) == dict(kind='synthetic', scene='synthetic:room', frames=300)
+    assert seq_dir('/w', room) != seq_dir('/w', B('r', 'synthetic:corridor', 300))
+    assert export_command('/app', room, '/out') == ['/app', 'export', 'synthetic:room', '/out', '--max-frames', '300']
+    with tempfile.TemporaryDirectory() as d:
+        try:
+            sequence_info(d)
+            raise AssertionError('sequence_info read an empty folder')
+        except SystemExit as e:
+            assert d in str(e) and 'scene.json' in str(e), e
+        with open(os.path.join(d, 'scene.json'), 'w') as f:
+            f.write('{"objects": [{"name": "car_1"}], "det_')
+        try:
+            sequence_info(d)
+            raise AssertionError('sequence_info read a cut file')
+        except SystemExit as e:
+            assert os.path.join(d, 'scene.json') in str(e) and 'not valid JSON' in str(e), e
+        with open(os.path.join(d, 'scene.json'), 'w') as f:
+            json.dump(dict(objects=[dict(name='car_1'), dict(name='cup_2')], det_every=30), f)
+        info = sequence_info(d)
+        assert [o['name'] for o in info['objects']] == ['car_1', 'cup_2'] and info['det_every'] == 30
     print('selftest: all checks passed')
     return 0
 
@@ -1122,12 +1186,11 @@ def main():
         seqs = [known[w] for w in want]
     if args.step == 'list':
         for s in seqs:
-            base = base_dir(args.work, s['base']) if s['kind'] == 'composite' else None
             d = seq_dir(args.work, s)
             state = 'generated' if os.path.isfile(os.path.join(d, 'bench_labels.json')) else 'missing'
             runs = [b for b in ('cpu', 'cuda') if os.path.isfile(os.path.join(run_dir(args.work, s, b), 'bench_run.json'))]
             print('%-20s %-9s %-9s runs: %-8s %s' % (s['name'], s['kind'], state, ','.join(runs) or '-', ' '.join(
-                shlex.quote(c) for c in dyngen_command(s, d, base, args.gen_jobs))))
+                shlex.quote(c) for c in generation_command(args, s, d))))
         return 0
     if args.step in ('generate', 'all'):
         generate(args, seqs)

@@ -38,6 +38,7 @@
 #include <cctype>
 #include <chrono>
 #include <cmath>
+#include <cstdint>
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
@@ -74,6 +75,7 @@
 #include "emfusion/sim/detector.hpp"
 #include "emfusion/sim/dynamic_scene.hpp"
 #include "emfusion/slam/object_history.hpp"
+#include "support/camera_input.hpp"
 #include "support/system_host.hpp"  // emfusion/slam/system.hpp, System<float, Host> compiled once
 #include "emfusion/volume/marching_cubes.hpp"
 #include "support/backend.hpp"
@@ -139,6 +141,14 @@ std::optional<sim::DynamicSceneParams> synthetic_params(const std::string& input
   }
   throw std::invalid_argument("unknown synthetic scene '" + name +
                               "' (room, room-small, room1, room8, room16, corridor, corridor-small)");
+}
+
+/// The simulated detector of a built-in scene (`run` and `export`): its
+/// 40x40 px minimum is for 640x480 images, as the system's.
+sim::SimulatedDetectorParams detector_params(const sim::DynamicSceneParams& scene) {
+  sim::SimulatedDetectorParams dp;
+  dp.min_area = std::max(1, int(dp.min_area * double(scene.width) * scene.height / (640.0 * 480.0)));
+  return dp;
 }
 
 /// The kinds of input `run` reads.
@@ -217,10 +227,7 @@ Input open_input(const RunOptions& o) {
         throw std::invalid_argument(std::string(name) + " does not apply to '" + o.input +
                                     "': a synthetic scene has its own camera and depth in metres");
     auto seq = std::make_shared<sim::SyntheticSequence>(*params);
-    // The detector's 40x40 px minimum is for 640x480 images, as the system's.
-    sim::SimulatedDetectorParams dp;
-    dp.min_area = std::max(1, int(dp.min_area * double(params->width) * params->height / (640.0 * 480.0)));
-    auto detector = std::make_shared<sim::SimulatedDetector<float>>(seq->scene(), dp);
+    auto detector = std::make_shared<sim::SimulatedDetector<float>>(seq->scene(), detector_params(*params));
     in.frames = seq->size();
     in.camera = seq->camera();
     in.timestamp = [seq](std::size_t i) { return seq->timestamp(i); };
@@ -730,6 +737,62 @@ void mesh(const std::string& checkpoint, const std::string& output) {
   fmt::print("wrote {} ({} objects, {} frames)\n", dir.string(), ck.map.objects.size(), ck.map.frames);
 }
 
+/// `emfusion export`: a built-in scene as a sequence folder holding what a
+/// recording of it with a detector would (FORMATS.md): noisy depth
+/// (examples::export_tum_sequence: depth/, depth.txt, calibration.txt,
+/// groundtruth.txt), groundtruth_objects/<name>.txt, masks/ (the detections
+/// `run` sees on the scene: the same simulated detector), masks_gt/ (the
+/// scene's own labels, object k as k + 1, every frame) and scene.json (the
+/// objects in label order and the detector's period). `run` and `eval`
+/// read it as any sequence; bench/generalisation.py scores runs on it as on
+/// its generated sequences.
+void export_scene(const std::string& input, const std::string& dir, int max_frames) {
+  const auto params = synthetic_params(input);
+  if (!params)
+    throw std::invalid_argument("'" + input + "' is not a built-in scene: expected synthetic:<scene>");
+  const sim::DynamicScene<float> scene = sim::make_dynamic_scene<float>(*params);
+  const int frames = max_frames > 0 ? std::min(max_frames, scene.frame_count()) : scene.frame_count();
+  const fs::path out(dir);
+  examples::export_tum_sequence(scene, input, frames, dir);
+  sim::SimulatedDetector<float> detector(scene, detector_params(*params));
+  std::vector<Detections> detected, truth;
+  Image<float, Host> depth;
+  Image<int, Host> labels;
+  for (int f = 0; f < frames; ++f) {
+    if (auto d = detector.detect(f, scene.timestamp(f))) detected.push_back(std::move(*d));
+    scene.render(f, depth, &labels, false);
+    Detections g;
+    g.timestamp = scene.timestamp(f);
+    const std::vector<int> l = labels.to_host();
+    g.labels = Image<std::uint16_t, Host>::from_host(labels.width(), labels.height(),
+                                                     std::vector<std::uint16_t>(l.begin(), l.end()));
+    for (int k = 0; k < scene.object_count(); ++k) g.instances.push_back({k + 1, scene.object_class(k), 1.0});
+    truth.push_back(std::move(g));
+  }
+  write_mask_directory((out / "masks").string(), detected);
+  write_mask_directory((out / "masks_gt").string(), truth);
+  create_output_directory((out / "groundtruth_objects").string());
+  Json info;
+  info["scene"] = input;
+  info["frames"] = frames;
+  info["det_every"] = detector_params(*params).period;
+  info["objects"] = Json::array();
+  for (int k = 0; k < scene.object_count(); ++k) {
+    Trajectory poses = scene.object_trajectory(k);
+    poses.resize(std::size_t(frames));
+    write_tum_trajectory((out / "groundtruth_objects" / (scene.object_name(k) + ".txt")).string(), poses);
+    info["objects"].push_back(Json{{"name", scene.object_name(k)}, {"class", scene.object_class(k)}});
+  }
+  write_json_file((out / "scene.json").string(), info);
+  write_text_file((out / "README.txt").string(),
+                  "Made by `emfusion export` from the built-in scene " + input + " (" + std::to_string(frames) +
+                      " frames): rendered noisy depth (no colour), the scene's exact camera and object "
+                      "trajectories, the simulated detector's masks (masks/) and the scene's labels "
+                      "(masks_gt/). Generated, not data: delete freely.\n");
+  fmt::print("wrote {} frames of {} to {} ({} objects, {} detector frames)\n", frames, input, dir,
+             scene.object_count(), detected.size());
+}
+
 void evaluate(const std::string& sequence, const std::string& output) {
   GroundTruth gt;
   if (const auto params = synthetic_params(sequence)) {
@@ -803,6 +866,13 @@ int main(int argc, char** argv) {
   auto* eval_cmd = app.add_subcommand("eval", "evaluate a run's outputs against a sequence's ground truth");
   eval_cmd->add_option("sequence", eval_sequence, "sequence directory or synthetic:<scene>")->required();
   eval_cmd->add_option("output", eval_output, "output directory of `emfusion run`")->required();
+  std::string export_input, export_dir;
+  int export_frames = 0;
+  auto* export_cmd =
+      app.add_subcommand("export", "write a built-in scene as a sequence folder: depth, ground truth, detector masks");
+  export_cmd->add_option("scene", export_input, "synthetic:<scene>")->required();
+  export_cmd->add_option("output", export_dir, "the folder to write")->required();
+  export_cmd->add_option("--max-frames", export_frames, "at most N frames")->check(CLI::PositiveNumber);
   std::string mesh_checkpoint, mesh_output;
   auto* mesh_cmd = app.add_subcommand("mesh", "write the meshes of a checkpoint (no sequence needed)");
   mesh_cmd->add_option("checkpoint", mesh_checkpoint, "a checkpoint.emfckpt of `emfusion run --checkpoint-every`")
@@ -822,6 +892,8 @@ int main(int argc, char** argv) {
       if (const int sig = examples::interrupt_signal()) return 128 + sig;
     } else if (*mesh_cmd) {
       mesh(mesh_checkpoint, mesh_output);
+    } else if (*export_cmd) {
+      export_scene(export_input, export_dir, export_frames);
     } else {
       evaluate(eval_sequence, eval_output);
     }
