@@ -904,6 +904,48 @@ TEMPLATE_LIST_TEST_CASE("A new object at the image border survives until it is s
   }
 }
 
+TEMPLATE_LIST_TEST_CASE("A young object the frame no longer shows at all is lost at once", "[slam]",
+                        emfusion::test::HeavyConfigs) {
+  using S = typename TestType::Scalar;
+  using B = typename TestType::Backend;
+  // The box at the right edge, created from its detection with fewer than
+  // 100 px inside the border (young: the grace keeps it). The camera then
+  // turns away from it, 0.005 rad a frame (about 0.7 px), and no detector
+  // runs again: once the frame neither draws nor associates it anywhere,
+  // its grace ends and it is lost as not visible at once.
+  const S x = box_x_at_border<S>();
+  REQUIRE(x < S(0.9));
+  const BoxScene<S> scene(vec3(x, S(0), S(1.2)));
+  SystemParams<S> params = small_params<S>();
+  REQUIRE(params.young_object_grace);
+  System<S, B> sys{scene.camera, params};
+  Image<int, Host> labels;
+  const Image<S, B> first = scene.template depth<B>(SE3<S>::identity(), &labels);
+  const Detections det = detections_of(labels, 1, "cup", 0.0);
+  REQUIRE(sys.process(first, 0.0, &det).created == std::vector<int>{1});
+  int deleted_at = -1, gone_at = -1;  // gone: none of the box in the frame
+  std::ptrdiff_t shown_then = -1;     // the box's pixels in the frame it was deleted in
+  for (int k = 1; k <= 40 && deleted_at < 0; ++k) {
+    Image<int, Host> seen;
+    const SE3<S> away(so3_exp(vec3(S(0), S(-0.005) * S(k), S(0))), Vec3<S>::zero());
+    const FrameResult r = sys.process(scene.template depth<B>(away, &seen), k / 30.0);
+    const std::vector<int> l = seen.to_host();
+    const std::ptrdiff_t shown = std::count(l.begin(), l.end(), 1);
+    if (shown == 0 && gone_at < 0) gone_at = k;
+    if (!r.deleted.empty()) {
+      CHECK(r.deleted == std::vector<int>{1});
+      deleted_at = k, shown_then = shown;
+    }
+  }
+  INFO("deleted at step " << deleted_at << " with " << shown_then << " px of the box in the frame; none from step "
+                          << gone_at);
+  REQUIRE(deleted_at > 0);
+  CHECK(shown_then < params.min_object_terms);  // not while the frame showed enough of it to track
+  CHECK((gone_at < 0 || deleted_at <= gone_at));
+  CHECK(sys.object_records()[0].reason == DeletionReason::not_visible);
+  CHECK(sys.map().lost.size() == 1);  // kept, to be found again
+}
+
 TEMPLATE_LIST_TEST_CASE("A young object not yet visible keeps its pose; once seen, it is tracked", "[slam]",
                         emfusion::test::HeavyConfigs) {
   using S = typename TestType::Scalar;

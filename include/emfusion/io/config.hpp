@@ -160,7 +160,7 @@ const std::vector<ParameterEntry<S>>& parameter_table() {
                  "move unmatched objects detected twice or more with a lower mean association onto a detection (0: off)"),
       EMF_NUMBER("merge_min_inliers", merge_min_inliers,
                  "merge two models of one object when this share of a detection fits both (0: off)"),
-      EMF_BOOL("young_object_grace", young_object_grace, "new objects survive invisibility until the next detection"),
+      EMF_BOOL("young_object_grace", young_object_grace, "new objects survive invisibility until the next detection (not once nothing of them shows)"),
       EMF_BOOL("hold_unseen_objects", hold_unseen_objects, "objects in that grace keep their pose while cut by the image border"),
       EMF_BOOL("hold_occluded_objects", hold_occluded_objects, "objects hidden behind others move on at their velocity instead of being tracked"),
       EMF_NUMBER("hidden_moving_seconds", hidden_moving_seconds, "an object hidden behind others moves on at its velocity this long after it was last tracked, then stays (s)"),

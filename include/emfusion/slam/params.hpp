@@ -195,7 +195,9 @@ struct SystemParams {
   /// An object created or re-identified on a detector frame is not deleted
   /// as not visible until it has been visible once or the detector runs
   /// again: one that enters the view across the image border would
-  /// otherwise go on the next frame.
+  /// otherwise go on the next frame. Not one of which the frame shows
+  /// nothing (fewer than min_object_terms pixels drawn and associated,
+  /// border band included): that one has left the view and is lost at once.
   bool young_object_grace = true;
   /// During that grace, an object the frame shows cut by the image border
   /// or no longer shows (fewer than keep_mask_pixels of its E-step
