@@ -753,14 +753,12 @@ void export_scene(const std::string& input, const std::string& dir, int max_fram
   const sim::DynamicScene<float> scene = sim::make_dynamic_scene<float>(*params);
   const int frames = max_frames > 0 ? std::min(max_frames, scene.frame_count()) : scene.frame_count();
   const fs::path out(dir);
-  examples::export_tum_sequence(scene, input, frames, dir);
-  sim::SimulatedDetector<float> detector(scene, detector_params(*params));
+  const sim::SimulatedDetectorParams dp = detector_params(*params);
+  sim::SimulatedDetector<float> detector(scene, dp);
   std::vector<Detections> detected, truth;
-  Image<float, Host> depth;
-  Image<int, Host> labels;
-  for (int f = 0; f < frames; ++f) {
+  // The scene's labels come with each frame's depth (one render a frame).
+  examples::export_tum_sequence(scene, input, frames, dir, [&](int f, const Image<int, Host>& labels) {
     if (auto d = detector.detect(f, scene.timestamp(f))) detected.push_back(std::move(*d));
-    scene.render(f, depth, &labels, false);
     Detections g;
     g.timestamp = scene.timestamp(f);
     const std::vector<int> l = labels.to_host();
@@ -768,14 +766,14 @@ void export_scene(const std::string& input, const std::string& dir, int max_fram
                                                      std::vector<std::uint16_t>(l.begin(), l.end()));
     for (int k = 0; k < scene.object_count(); ++k) g.instances.push_back({k + 1, scene.object_class(k), 1.0});
     truth.push_back(std::move(g));
-  }
+  });
   write_mask_directory((out / "masks").string(), detected);
   write_mask_directory((out / "masks_gt").string(), truth);
   create_output_directory((out / "groundtruth_objects").string());
   Json info;
   info["scene"] = input;
   info["frames"] = frames;
-  info["det_every"] = detector_params(*params).period;
+  info["det_every"] = dp.period;
   info["objects"] = Json::array();
   for (int k = 0; k < scene.object_count(); ++k) {
     Trajectory poses = scene.object_trajectory(k);

@@ -22,6 +22,7 @@
 #include <cstdint>
 #include <cstdio>
 #include <filesystem>
+#include <functional>
 #include <optional>
 #include <stdexcept>
 #include <string>
@@ -131,9 +132,12 @@ class CameraInput {
 /// earlier export there are replaced): depth/<frame>.png (16-bit, value =
 /// metres * 5000 rounded, 0 = no measurement, depth beyond 13.1 m dropped),
 /// depth.txt, groundtruth.txt, calibration.txt and README.txt. Throws naming
-/// the file that cannot be written.
+/// the file that cannot be written. With `labels_of`, each frame is rendered
+/// with its labels (object k as k + 1, 0 elsewhere), which it is given with
+/// the frame's index: one render a frame for a caller that writes them too.
 inline void export_tum_sequence(const sim::DynamicScene<float>& scene, const std::string& name, int frames,
-                                const std::string& dir) {
+                                const std::string& dir,
+                                const std::function<void(int, const Image<int, Host>&)>& labels_of = {}) {
   namespace fs = std::filesystem;
   if (frames < 1 || frames > scene.frame_count())
     throw std::invalid_argument("export_tum_sequence: frames must be in 1.." + std::to_string(scene.frame_count()) +
@@ -143,8 +147,10 @@ inline void export_tum_sequence(const sim::DynamicScene<float>& scene, const std
   const PinholeCamera<float>& cam = scene.camera();
   std::string list = "# timestamp filename (16-bit PNG, metres = value / 5000, 0 = invalid), " + name + "\n";
   Image<float, Host> depth;
+  Image<int, Host> labels;
   for (int f = 0; f < frames; ++f) {
-    scene.render(f, depth);
+    scene.render(f, depth, labels_of ? &labels : nullptr);
+    if (labels_of) labels_of(f, labels);
     const std::vector<float> metres = depth.to_host();
     std::vector<std::uint16_t> units(metres.size());
     for (std::size_t i = 0; i < metres.size(); ++i) {
