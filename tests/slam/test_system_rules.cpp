@@ -82,8 +82,8 @@ SystemParams<S> small_params() {
   return p;
 }
 
-/// A system that processed the box scene's first frame with a detection of
-/// the box as `class_name`.
+/// A system that processed the box scene's first frame (the box at
+/// `box_center`) with a detection of the box as `class_name`.
 template <class S, class B>
 struct FirstFrame {
   BoxScene<S> scene;
@@ -92,8 +92,9 @@ struct FirstFrame {
   System<S, B> system;
   FrameResult result;
   explicit FirstFrame(const std::string& class_name, int scale = 1,
-                      const SystemParams<S>& params = small_params<S>())
-      : scene(vec3(S(0), S(0), S(1.2)), scale), system(scene.camera, params) {
+                      const SystemParams<S>& params = small_params<S>(),
+                      const Vec3<S>& box_center = vec3(S(0), S(0), S(1.2)))
+      : scene(box_center, scale), system(scene.camera, params) {
     const Detections det = detections_of(labels, 1, class_name, 0.0);
     result = system.process(depth, 0.0, &det);
   }
@@ -881,24 +882,21 @@ TEMPLATE_LIST_TEST_CASE("A new object at the image border survives until it is s
   // inside the 5 px visibility border: not "visible" by the deletion rule.
   const S x = box_x_at_border<S>();
   REQUIRE(x < S(0.9));
-  const BoxScene<S> scene(vec3(x, S(0), S(1.2)));
   for (const bool grace : {true, false}) {
     SystemParams<S> params = small_params<S>();
     params.young_object_grace = grace;
-    System<S, B> sys{scene.camera, params};
-    Image<int, Host> labels;
-    const Image<S, B> depth = scene.template depth<B>(SE3<S>::identity(), &labels);
-    const Detections det = detections_of(labels, 1, "cup", 0.0);
-    const FrameResult first = sys.process(depth, 0.0, &det);
+    FirstFrame<S, B> first("cup", 1, params, vec3(x, S(0), S(1.2)));
+    System<S, B>& sys = first.system;
+    const Image<S, B>& depth = first.depth;
     INFO("grace " << grace);
-    REQUIRE(first.created == std::vector<int>{1});
+    REQUIRE(first.result.created == std::vector<int>{1});
     const FrameResult second = sys.process(depth, 1 / 30.0);
     REQUIRE(second.object_status.size() == 1);
     CHECK(second.object_status[0].visible_pixels < 100);  // 1600 px at 640x480 is 100 px at 160x120
     CHECK(second.deleted.empty() == grace);
     if (!grace) continue;
     // The detector runs again and the grace ends: the rule applies.
-    const Detections none = detections_of(labels, 1, "", 2 / 30.0);
+    const Detections none = detections_of(first.labels, 1, "", 2 / 30.0);
     const FrameResult third = sys.process(depth, 2 / 30.0, &none);
     CHECK(third.deleted == std::vector<int>{1});
   }
@@ -915,14 +913,12 @@ TEMPLATE_LIST_TEST_CASE("A young object the frame no longer shows at all is lost
   // its grace ends and it is lost as not visible at once.
   const S x = box_x_at_border<S>();
   REQUIRE(x < S(0.9));
-  const BoxScene<S> scene(vec3(x, S(0), S(1.2)));
-  SystemParams<S> params = small_params<S>();
+  const SystemParams<S> params = small_params<S>();
   REQUIRE(params.young_object_grace);
-  System<S, B> sys{scene.camera, params};
-  Image<int, Host> labels;
-  const Image<S, B> first = scene.template depth<B>(SE3<S>::identity(), &labels);
-  const Detections det = detections_of(labels, 1, "cup", 0.0);
-  REQUIRE(sys.process(first, 0.0, &det).created == std::vector<int>{1});
+  FirstFrame<S, B> first("cup", 1, params, vec3(x, S(0), S(1.2)));
+  REQUIRE(first.result.created == std::vector<int>{1});
+  const BoxScene<S>& scene = first.scene;
+  System<S, B>& sys = first.system;
   int deleted_at = -1, gone_at = -1;  // gone: none of the box in the frame
   std::ptrdiff_t shown_then = -1;     // the box's pixels in the frame it was deleted in
   for (int k = 1; k <= 40 && deleted_at < 0; ++k) {
@@ -962,12 +958,9 @@ TEMPLATE_LIST_TEST_CASE("A young object not yet visible keeps its pose; once see
     INFO("hold " << hold);
     SystemParams<S> params = small_params<S>();
     params.hold_unseen_objects = hold;
-    const BoxScene<S> start(vec3(x, S(0), S(1.2)));
-    System<S, B> sys{start.camera, params};
-    Image<int, Host> labels;
-    const Image<S, B> depth = start.template depth<B>(SE3<S>::identity(), &labels);
-    const Detections det = detections_of(labels, 1, "cup", 0.0);
-    REQUIRE(sys.process(depth, 0.0, &det).created == std::vector<int>{1});
+    FirstFrame<S, B> first("cup", 1, params, vec3(x, S(0), S(1.2)));
+    REQUIRE(first.result.created == std::vector<int>{1});
+    System<S, B>& sys = first.system;
     const Vec3<S> found = sys.objects()[0]->pose().translation();
     int first_tracked = -1;
     for (int f = 1; f <= 24; ++f) {
