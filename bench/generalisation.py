@@ -5,16 +5,18 @@ Generates dynamic RGB-D sequences with the shared generator (shared/tools/dyngen
 synthetic rooms and composites on redkitchen_300 (also 'there and back' ones, see
 bench/there_and_back.py), with other seeds, object mixes, speeds up to the generator's limits,
 missed and false detections; and writes the app's own built-in scenes (synthetic:room,
-synthetic:corridor) as sequences of the same kind with `emfusion export`. Runs the app on each, then scores the runs against the ground
-truth and prints a table and a PASS/FAIL summary per target. docs/benchmarks.md has the
+synthetic:corridor) as sequences of the same kind with `emfusion export`. Runs the app on
+each, then scores the runs against the ground truth and prints a table and a PASS/FAIL
+summary per target. docs/benchmarks.md has the
 commands, the sequence list and the metric definitions.
 
 Steps (subcommands):
   list      the sequences (name, kind, generator command)
   generate  make the sequences that are missing (needs numpy, scipy, opencv: Debian's
             python3-numpy python3-scipy python3-opencv; installed with apt-get when missing and
-            root; the built-in scenes need the app, --app); also writes <seq>/bench_labels.json, the per-frame label areas and detections
-            the report needs, so that run and report need numpy only
+            root; the built-in scenes need the app, --app); also writes
+            <seq>/bench_labels.json, the per-frame label areas and detections the report needs,
+            so that run and report need numpy only
   export    copy generated sequences without colour and ground-truth masks (--to DIR), for a
             machine that cannot generate (run and report there with --work DIR)
   run       run the app on each generated sequence (always re-runs)
@@ -317,8 +319,8 @@ def labels_summary(seq):
 
 # What run and report read from a generated sequence: no rgb/ (the app tracks on depth and reads
 # a sequence without colour) and no masks_gt/ (bench_labels.json holds what the report needs).
-EXPORT_FILES = ['depth.txt', 'calibration.txt', 'groundtruth.txt', 'dyngen.json', 'scene.json', 'bench_labels.json',
-                'bench_params.json', 'README.txt']
+EXPORT_FILES = ['depth.txt', 'calibration.txt', 'groundtruth.txt', 'dyngen.json', 'scene.json',
+                'bench_labels.json', 'bench_params.json', 'README.txt']
 EXPORT_DIRS = ['depth', 'masks', 'groundtruth_objects']
 
 
@@ -1114,7 +1116,8 @@ def selftest():
     room = B('r', 'synthetic:room', 300)
     assert seq_params(room) == dict(kind='synthetic', scene='synthetic:room', frames=300)
     assert seq_dir('/w', room) != seq_dir('/w', B('r', 'synthetic:corridor', 300))
-    assert export_command('/app', room, '/out') == ['/app', 'export', 'synthetic:room', '/out', '--max-frames', '300']
+    assert export_command('/app', room, '/out') == ['/app', 'export', 'synthetic:room', '/out',
+                                                    '--max-frames', '300']
     with tempfile.TemporaryDirectory() as d:
         try:
             sequence_info(d)
