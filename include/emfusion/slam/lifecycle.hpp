@@ -223,12 +223,14 @@ struct HeldPose {
 ///   model, as drawn at its last pose (its rendering of the last frame),
 ///   covers at least keep_mask_pixels inside the border and is more often
 ///   behind a surface of the frame nearer by twice likelihood.sigma than
-///   within likelihood.sigma of it moves on at its mean velocity of the last
-///   0.2 s (carry_on; stays at `before` without one) for up to
-///   hidden_moving_seconds after its last tracked frame, then stays:
-///   something passes in front of it, and the part left of it would pull
-///   it along with the surface in front (docs/system.md, "Held while
-///   hidden"). Its record keeps since when (ObjectRecord::hidden_since).
+///   within likelihood.sigma of it, and to which this frame's E-step gives
+///   fewer than keep_mask_pixels inside the border (one that shows as much
+///   of itself as keeps it visible is tracked on that), moves on at its
+///   mean velocity of the last 0.2 s (carry_on; stays at `before` without
+///   one) for up to hidden_moving_seconds after its last tracked frame,
+///   then stays: something passes in front of it, and the part left of it
+///   would pull it along with the surface in front (docs/system.md, "Held
+///   while hidden"). Its record keeps since when (ObjectRecord::hidden_since).
 /// The segmentation is the last frame's, whose labels may no longer be the
 /// objects' order, so it is not used. With the hidden rule one pass over
 /// the frame for every object's cover; one more for the E-step counts on
@@ -249,9 +251,11 @@ std::vector<std::optional<HeldPose<S>>> hold_decisions(Map<S, B>& map, const Fra
   const int border = params.visibility_border_for(frame.segmentation.width());
   const int min_pixels = params.keep_mask_pixels_for(frame.segmentation.width(), frame.segmentation.height());
   // The hidden rule: more of its model is behind a nearer surface than
-  // shows, and the E-step does not give it twice as many pixels as show
-  // (then the frame shows it beside where it is drawn: it is displaced,
-  // not hidden, and tracking it brings it back). Every object's cover in
+  // shows, and the E-step gives it fewer pixels than keep it visible
+  // (with as many, what shows of it is enough to track it on: c214's book
+  // behind a chair's slats, held, fell behind its turn) and not twice as
+  // many as show (then the frame shows it beside where it is drawn: it is
+  // displaced, not hidden, and tracking it brings it back). Every object's cover in
   // one pass; the E-step counts in another only where a rule needs them.
   std::vector<detail::lifecycle::DrawnModel<S>> models(static_cast<std::size_t>(n));
   for (int k = 0; k < n && params.hold_occluded_objects; ++k) {
@@ -279,7 +283,9 @@ std::vector<std::optional<HeldPose<S>>> hold_decisions(Map<S, B>& map, const Fra
                                                ? all_object_pixels(frame, n, border, workspace ? *workspace : local)
                                                : std::vector<ObjectPixels>{};
   const auto hidden = [&](int k) {
-    return covered(k) && pixels[std::size_t(k)].associated_inner <= 2 * covers[std::size_t(k)].agree;
+    if (!covered(k)) return false;
+    const int associated = pixels[std::size_t(k)].associated_inner;
+    return associated < min_pixels && associated <= 2 * covers[std::size_t(k)].agree;
   };
   // The young rule: cut by the border or gone.
   const auto unseen = [&](int k) {

@@ -208,7 +208,8 @@ struct SystemParams {
   bool hold_unseen_objects = true;
   /// An object whose model, drawn at its last pose, covers at least
   /// keep_mask_pixels and is more often behind a nearer surface of the frame
-  /// than shown by it is not tracked: it moves on at its velocity instead
+  /// than shown by it, and to which the E-step gives fewer than
+  /// keep_mask_pixels, is not tracked: it moves on at its velocity instead
   /// of following the part left of it (hold_decisions, lifecycle.hpp).
   bool hold_occluded_objects = true;
   /// ... for up to this long after its last tracked frame (seconds); after
