@@ -371,6 +371,19 @@ def run_dir(work, s, backend):
     return os.path.join(work, 'runs', backend, os.path.basename(seq_dir(work, s)))
 
 
+def run_logged(cmd, log_path):
+    """Runs cmd (OMP_WAIT_POLICY=passive unless set) with its output and the command line in
+    log_path; returns its exit status and seconds."""
+    env = dict(os.environ)
+    env.setdefault('OMP_WAIT_POLICY', 'passive')
+    t0 = time.time()
+    with open(log_path, 'w') as lf:
+        lf.write(' '.join(shlex.quote(c) for c in cmd) + '\n')
+        lf.flush()
+        r = subprocess.run(cmd, stdout=lf, stderr=subprocess.STDOUT, env=env)
+    return r.returncode, time.time() - t0
+
+
 def run_one(args, s):
     seq = seq_dir(args.work, s)
     out = run_dir(args.work, s, args.backend + args.tag)
@@ -380,17 +393,10 @@ def run_one(args, s):
         subprocess.run(['rm', '-rf', '--', out], check=True)
     os.makedirs(out)
     cmd = [args.app, 'run', seq, '--output', out, '--backend', args.backend, '--verbose'] + args.app_args
-    env = dict(os.environ)
-    env.setdefault('OMP_WAIT_POLICY', 'passive')
-    t0 = time.time()
-    with open(os.path.join(out, 'bench_run.log'), 'w') as lf:
-        lf.write(' '.join(shlex.quote(c) for c in cmd) + '\n')
-        lf.flush()
-        r = subprocess.run(cmd, stdout=lf, stderr=subprocess.STDOUT, env=env)
-    dt = time.time() - t0
+    rc, dt = run_logged(cmd, os.path.join(out, 'bench_run.log'))
     with open(os.path.join(out, 'bench_run.json'), 'w') as f:
-        json.dump(dict(command=cmd, rc=r.returncode, seconds=round(dt, 1)), f, indent=1)
-    return s['name'], ('ok' if r.returncode == 0 else 'failed rc %d, see %s/bench_run.log' % (r.returncode, out)), dt
+        json.dump(dict(command=cmd, rc=rc, seconds=round(dt, 1)), f, indent=1)
+    return s['name'], ('ok' if rc == 0 else 'failed rc %d, see %s/bench_run.log' % (rc, out)), dt
 
 
 def reference_frames(s):
@@ -417,17 +423,10 @@ def run_reference(args, base, n, path):
     static scene gets on the frames a composite shows (the issue's camera target)."""
     os.makedirs(os.path.dirname(path), exist_ok=True)
     cmd = [args.track_camera, base_dir(args.work, base), path, '--backend', args.backend, '--max-frames', str(n)]
-    env = dict(os.environ)
-    env.setdefault('OMP_WAIT_POLICY', 'passive')
-    t0 = time.time()
-    with open(path + '.log', 'w') as lf:
-        lf.write(' '.join(shlex.quote(c) for c in cmd) + '\n')
-        lf.flush()
-        r = subprocess.run(cmd, stdout=lf, stderr=subprocess.STDOUT, env=env)
-    if r.returncode != 0 and os.path.isfile(path):
+    rc, dt = run_logged(cmd, path + '.log')
+    if rc != 0 and os.path.isfile(path):
         os.remove(path)
-    status = 'ok' if r.returncode == 0 else 'failed rc %d, see %s.log' % (r.returncode, path)
-    return 'track_camera %s:%d' % (base, n), status, time.time() - t0
+    return 'track_camera %s:%d' % (base, n), 'ok' if rc == 0 else 'failed rc %d, see %s.log' % (rc, path), dt
 
 
 def run(args, seqs):

@@ -255,8 +255,9 @@ std::vector<std::optional<HeldPose<S>>> hold_decisions(Map<S, B>& map, const Fra
   // (with as many, what shows of it is enough to track it on: c214's book
   // behind a chair's slats, held, fell behind its turn) and not twice as
   // many as show (then the frame shows it beside where it is drawn: it is
-  // displaced, not hidden, and tracking it brings it back). Every object's cover in
-  // one pass; the E-step counts in another only where a rule needs them.
+  // displaced, not hidden, and tracking it brings it back). Every object's
+  // cover in one pass; the E-step counts in another only where a rule
+  // needs them.
   std::vector<detail::lifecycle::DrawnModel<S>> models(static_cast<std::size_t>(n));
   for (int k = 0; k < n && params.hold_occluded_objects; ++k) {
     const ObjectModel<S, B>& o = *map.objects[std::size_t(k)];
