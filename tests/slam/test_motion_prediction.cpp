@@ -79,4 +79,9 @@ TEST_CASE("Carrying on goes in a straight line at the mean velocity of the last 
   CHECK_FALSE(carry_on(t, last, last, 1.0));
   CHECK_FALSE(carry_on(t, 9 * dt, last, 1.0));
   CHECK_FALSE(carry_on(Trajectory{{last, start}}, last, last + dt, 1.0));
+  // Nor from a pose before a gap longer than the window (an object found
+  // again after it was lost): its jump is no velocity.
+  const Trajectory found{{last - 0.5, start}, {last, SE3<double>::translation(Vec3<double>{{0.3, 0, 1}})}};
+  CHECK_FALSE(carry_on(found, last, last + dt, 1.0));
+  CHECK(carry_on(found, last, last + dt, 1.0, 0.5));
 }

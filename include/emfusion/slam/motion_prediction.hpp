@@ -46,7 +46,9 @@ inline std::optional<SE3<double>> predict_pose(const Trajectory& trajectory, dou
 /// Where an object last estimated at `last` (the time of its trajectory's
 /// last pose, else nothing) is at `timestamp`, up to `max_seconds` later
 /// (else nothing), if it goes on at the mean velocity of its poses over the
-/// `window` seconds up to `last` (at least two poses): in a straight line,
+/// `window` seconds up to `last` (at least two poses there, else nothing:
+/// the pose before a gap, as an object's before it was lost and found
+/// again elsewhere, says nothing of its velocity now): in a straight line,
 /// turning about its origin at their mean rate, the two apart so that a
 /// small turn does not bend its path over many frames.
 inline std::optional<SE3<double>> carry_on(const Trajectory& trajectory, double last, double timestamp,
@@ -55,6 +57,7 @@ inline std::optional<SE3<double>> carry_on(const Trajectory& trajectory, double 
   const double ahead = timestamp - last;
   if (n < 2 || trajectory[n - 1].timestamp != last || !(ahead > 0) || !(ahead <= max_seconds)) return std::nullopt;
   std::size_t first = n - 2;
+  if (trajectory[first].timestamp < last - window) return std::nullopt;
   while (first > 0 && trajectory[first - 1].timestamp >= last - window) --first;
   const TimedPose &a = trajectory[first], &b = trajectory[n - 1];
   const double span = b.timestamp - a.timestamp;
@@ -62,6 +65,22 @@ inline std::optional<SE3<double>> carry_on(const Trajectory& trajectory, double 
   const double s = ahead / span;
   const Mat3<double> R = b.pose.rotation() * so3_exp(so3_log(a.pose.rotation().transpose() * b.pose.rotation()) * s);
   return SE3<double>(R, b.pose.translation() + (b.pose.translation() - a.pose.translation()) * s);
+}
+
+/// Whether an object last estimated at `last` (the time of its
+/// trajectory's last pose, else false) moved at most `max_translation`
+/// metres and turned at most `max_rotation` radians between its first pose
+/// of the `window` seconds up to `last` and that one (at least two poses
+/// there, else false: nothing says it stands still).
+inline bool standing_still(const Trajectory& trajectory, double last, double window, double max_translation,
+                           double max_rotation) {
+  const std::size_t n = trajectory.size();
+  if (n < 2 || trajectory[n - 1].timestamp != last || trajectory[n - 2].timestamp < last - window) return false;
+  std::size_t first = n - 2;
+  while (first > 0 && trajectory[first - 1].timestamp >= last - window) --first;
+  const SE3<double> moved = trajectory[first].pose.inverse() * trajectory[n - 1].pose;
+  return norm(trajectory[n - 1].pose.translation() - trajectory[first].pose.translation()) <= max_translation &&
+         norm(so3_log(moved.rotation())) <= max_rotation;
 }
 
 }  // namespace emfusion
