@@ -40,15 +40,26 @@ using emfusion::test::Approx;
 namespace {
 
 /// A wall 2 m ahead and a box 0.8 m in front of it, seen by a 160x120 camera
-/// (`scale` 2: 320x240).
+/// (`scale` 2: 320x240). With `slats`, six slats 3 cm from the wall, level
+/// and upright, spread over 3.4 m and clear of where the box stands or is
+/// moved to (shapes 2-7, never detected): a bare wall leaves the camera
+/// free to slide along it, and once the box moved while out of view
+/// nothing else in the frame holds it (a pan back over the bare wall slid
+/// 16-25 cm on the CPU, 30 cm on a GPU, each way its own).
 template <class S>
 struct BoxScene {
   PinholeCamera<S> camera;
   sim::Scene<S> scene;
-  explicit BoxScene(const Vec3<S>& box_center = vec3(S(0), S(0), S(1.2)), int scale = 1)
+  explicit BoxScene(const Vec3<S>& box_center = vec3(S(0), S(0), S(1.2)), int scale = 1, bool slats = false)
       : camera{S(140 * scale), S(140 * scale), S(80 * scale - 0.5), S(60 * scale - 0.5), 160 * scale, 120 * scale} {
     scene.add(sim::make_plane(sim::look_at(vec3(S(0), S(0), S(2)), Vec3<S>::zero(), vec3(S(0), S(-1), S(0)))));
     scene.add(sim::make_box(SE3<S>(so3_exp(vec3(S(0.2), S(0.4), S(0))), box_center), vec3(S(0.15), S(0.1), S(0.12))));
+    const double slat_x[6] = {-1.2, -0.65, 0.55, 1.1, 1.65, 2.2};
+    for (int k = 0; slats && k < 6; ++k) {
+      const Vec3<S> at = vec3(S(slat_x[k]), k % 2 ? S(0.3) : S(-0.3), S(1.97));
+      const Vec3<S> half = k % 3 == 1 ? vec3(S(0.03), S(0.22), S(0.04)) : vec3(S(0.22), S(0.03), S(0.04));
+      scene.add(sim::make_box(SE3<S>::translation(at), half));
+    }
   }
   template <class B>
   Image<S, B> depth(const SE3<S>& T_world_camera, Image<int, Host>* labels = nullptr) const {
@@ -91,10 +102,9 @@ struct FirstFrame {
   Image<S, B> depth = scene.template depth<B>(SE3<S>::identity(), &labels);
   System<S, B> system;
   FrameResult result;
-  explicit FirstFrame(const std::string& class_name, int scale = 1,
-                      const SystemParams<S>& params = small_params<S>(),
-                      const Vec3<S>& box_center = vec3(S(0), S(0), S(1.2)))
-      : scene(box_center, scale), system(scene.camera, params) {
+  explicit FirstFrame(const std::string& class_name, int scale = 1, const SystemParams<S>& params = small_params<S>(),
+                      const Vec3<S>& box_center = vec3(S(0), S(0), S(1.2)), bool slats = false)
+      : scene(box_center, scale, slats), system(scene.camera, params) {
     const Detections det = detections_of(labels, 1, class_name, 0.0);
     result = system.process(depth, 0.0, &det);
   }
@@ -992,6 +1002,53 @@ TEMPLATE_LIST_TEST_CASE("A young object not yet visible keeps its pose; once see
   }
 }
 
+TEMPLATE_LIST_TEST_CASE("An object leaving the view keeps its pose instead of following what is left of it", "[slam]",
+                        emfusion::test::SystemRuleConfigs) {
+  using S = typename TestType::Scalar;
+  using B = typename TestType::Backend;
+  // The box stands still; the camera pans right over the wall with slats
+  // until it is lost. In its last frames in view only an edge of it shows,
+  // whose alignment to the model slid it centimetres along the viewing ray
+  // (the model is least accurate at its edges, and a face or two constrain
+  // few directions). With leaving_share the frames that show less than
+  // half of its extent do not track it, standing still as it does: it
+  // keeps its pose.
+  S slide[2] = {S(-1), S(-1)};
+  int held[2] = {0, 0};
+  for (const bool rule : {true, false}) {
+    INFO("leaving_share " << (rule ? "0.5" : "0 (off, the default)"));
+    SystemParams<S> params = small_params<S>();
+    params.leaving_share = rule ? S(0.5) : S(0);
+    FirstFrame<S, B> first("cup", 1, params, vec3(S(0), S(0), S(1.2)), true);
+    System<S, B>& sys = first.system;
+    first.detect_again("cup");
+    const Vec3<S> start = sys.objects()[0]->pose().translation();
+    Vec3<S> first_held = start;  // where it was when first held
+    int lost_at = -1;
+    for (int k = 1; k <= 40 && lost_at < 0; ++k) {
+      const Vec3<S> was = sys.objects()[0]->pose().translation();
+      const SE3<S> pose(so3_exp(vec3(S(0), S(0.02) * S(k), S(0))), Vec3<S>::zero());
+      const FrameResult r = sys.process(first.scene.template depth<B>(pose), k / 30.0);
+      REQUIRE(r.object_status.size() == 1);
+      if (r.object_status[0].tracking == TrackingOutcome::not_tracked && held[rule]++ == 0) first_held = was;
+      if (!r.deleted.empty()) lost_at = k;
+    }
+    REQUIRE(lost_at > 0);
+    REQUIRE(sys.map().lost.size() == 1);
+    const Vec3<S> lost = sys.map().lost[0].object->pose().translation();
+    slide[rule] = norm(lost - start);
+    INFO("lost at pan step " << lost_at << ", " << held[rule] << " frames held, " << slide[rule]
+                             << " m from where it was, " << norm(lost - first_held)
+                             << " m from where it was first held");
+    CHECK((rule ? held[rule] > 0 : held[rule] == 0));
+    // Held, it did not move; tracked before that within 1.5 cm.
+    if (rule) CHECK(norm(lost - first_held) == S(0));
+    if (rule) CHECK(double(slide[rule]) < 0.015);
+  }
+  // Without the rule the edge's frames moved it 6.1 cm (float, CPU).
+  CHECK(double(slide[0]) > double(slide[1]) + 0.02);
+}
+
 TEMPLATE_LIST_TEST_CASE("A lost object the frame shows where it was lost comes back without a detection", "[slam]",
                         emfusion::test::SystemRuleConfigs) {
   using S = typename TestType::Scalar;
@@ -1000,7 +1057,11 @@ TEMPLATE_LIST_TEST_CASE("A lost object the frame shows where it was lost comes b
   params.min_association = 0;  // this test is about the visibility rule (as the re-identification test)
   params.refind_in_view = true;
   params.refind_unexplained_every = 0;  // the next test's rule
-  FirstFrame<S, B> first("cup", 1, params);
+  // Held while the camera leaves it, the box is lost where it stands (off,
+  // its last frames in view slid it 5.7 cm, and drawn there on the way back
+  // the frame saw through it: not found; the test above).
+  params.leaving_share = S(0.5);
+  FirstFrame<S, B> first("cup", 1, params, vec3(S(0), S(0), S(1.2)), true);  // slats: see BoxScene
   System<S, B>& sys = first.system;
   REQUIRE(sys.objects().size() == 1);
   // Detected again on the next frame, or on the first frame only (a false
@@ -1028,14 +1089,14 @@ TEMPLATE_LIST_TEST_CASE("A lost object the frame shows where it was lost comes b
     CHECK(sys.objects()[0]->id() == 1);
     CHECK(sys.map().lost.empty());
     CHECK_FALSE(sys.object_records()[0].deleted);
-    // Its last frames before it was lost tracked a sliver at the image
-    // border, which let it slide about 2 cm; found there, it is tracked
-    // back (1.02 cm from where it was in float on the CPU).
+    // Held while it left the view (leaving_share), it was lost about where
+    // it stood; found there, it is tracked back (0.91 cm from where it was
+    // in float on the CPU).
     const Vec3<S> shift = (sys.camera_pose().inverse() * sys.objects()[0]->pose()).translation() - start.translation();
     CHECK(double(norm(shift)) < 0.015);
   }
   SECTION("the box moved 0.3 m while out of view: it stays lost until a detection finds it") {
-    CHECK(pan_back(BoxScene<S>(vec3(S(0.3), S(0), S(1.2)))) < 0);
+    CHECK(pan_back(BoxScene<S>(vec3(S(0.3), S(0), S(1.2)), 1, true)) < 0);
     CHECK(sys.objects().empty());
     CHECK(sys.map().lost.size() == 1);
   }
@@ -1052,7 +1113,12 @@ TEMPLATE_LIST_TEST_CASE("A lost object back in view elsewhere is found in what n
   SystemParams<S> params = small_params<S>();
   params.min_association = 0;  // as the test above
   params.refind_unexplained_every = mode == 1 ? 0 : 1;
-  FirstFrame<S, B> first("cup", 1, params);
+  // (With leaving_share the box is lost where it stood, and the fit from
+  // there to the first border-cut view of it put it 10 cm off in float on
+  // the CPU, tracked there after; lost where its last frames in view slid
+  // it, the fit was right: a fit to a border-cut view is a guess either
+  // way, docs/decisions.md, "Objects the camera leaves keep their pose".)
+  FirstFrame<S, B> first("cup", 1, params, vec3(S(0), S(0), S(1.2)), true);  // slats: see BoxScene
   System<S, B>& sys = first.system;
   REQUIRE(sys.objects().size() == 1);
   if (mode != 2) first.detect_again("cup");  // detected again on the next frame
@@ -1064,7 +1130,7 @@ TEMPLATE_LIST_TEST_CASE("A lost object back in view elsewhere is found in what n
   // lost, its model shows the wall: refind_in_view does not find it); the
   // camera pans back, without a detection, and sees it again about 20
   // frames later (0.67 s: it can have gone 0.67 m at refind_unexplained_speed).
-  const BoxScene<S> moved(vec3(S(-0.3), S(0), S(1.2)));
+  const BoxScene<S> moved(vec3(S(-0.3), S(0), S(1.2)), 1, true);
   const int found_at = pan_back_until_found(sys, moved, k, FoundBy::unexplained);
   INFO("lost at pan step " << k << ", found at step " << found_at);
   if (unexplained) {

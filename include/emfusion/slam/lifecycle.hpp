@@ -9,10 +9,12 @@
 // second is drawn where the camera no longer sees it, as after a fast move
 // its tracking could not follow. Objects created or re-identified on a
 // detector frame are spared the visibility rule until first seen, and not
-// tracked meanwhile while the image border cuts them; objects hidden behind
-// a nearer surface move on at their velocity instead of being tracked
-// (both hold_decisions, which System runs before tracking the objects, so
-// that the held ones are not solved).
+// tracked meanwhile while the image border cuts them; objects standing
+// still that the camera leaves keep their pose once too little of them is
+// in view to align, and objects hidden behind a nearer surface move on at
+// their velocity, instead of being tracked (all hold_decisions, which
+// System runs before tracking the objects, so that the held ones are not
+// solved).
 #pragma once
 
 #include <algorithm>
@@ -21,6 +23,7 @@
 #include <cstdint>
 #include <limits>
 #include <memory>
+#include <numbers>
 #include <optional>
 #include <utility>
 #include <vector>
@@ -29,12 +32,14 @@
 #include <malloc.h>
 #endif
 
+#include "emfusion/core/camera.hpp"
 #include "emfusion/core/parallel.hpp"
 #include "emfusion/slam/frame.hpp"
 #include "emfusion/slam/frame_result.hpp"
 #include "emfusion/slam/map.hpp"
 #include "emfusion/slam/motion_prediction.hpp"
 #include "emfusion/slam/params.hpp"
+#include "emfusion/volume/raycast.hpp"
 
 namespace emfusion {
 
@@ -207,9 +212,10 @@ struct HeldPose {
 };
 
 /// Objects the frame does not show well enough to track, decided before
-/// their solves (from this frame's E-step at the predicted poses and the
-/// objects' renderings of the last frame): per object the pose it goes to
-/// and its outcome, not_tracked (young) or moved_on (hidden), or nothing
+/// their solves (from this frame's E-step at the predicted poses, the
+/// objects' renderings of the last frame and, for the leaving rule, a cast
+/// of the model at its last pose): per object the pose it goes to
+/// and its outcome, not_tracked (young, leaving) or moved_on (hidden), or nothing
 /// where it is tracked. System has track_objects skip the held objects
 /// and then puts them at their poses (apply_holds).
 /// - The grace's other half (SystemParams::hold_unseen_objects): a young
@@ -219,6 +225,16 @@ struct HeldPose {
 ///   than in the border band, or fewer than min_object_terms in all) goes
 ///   back to the pose it had before the frame (`before`). A small object
 ///   wholly in view is tracked as ever.
+/// - Leaving (SystemParams::leaving_share): any other object that stands
+///   still (SystemParams::leaving_still over the last 0.2 s), of whose
+///   extent, seen from this frame's camera at its last pose, less than
+///   leaving_share lies inside the image less the visibility border
+///   (shows_less_than), and that the frame still shows where it stands
+///   (its model, cast there from this frame's camera, agrees with the
+///   frame on two in three of the pixels no nearer surface covers, or
+///   fewer than keep_mask_pixels are left to tell) keeps its pose
+///   `before`, not_tracked: a partial view slid such objects centimetres
+///   (docs/system.md, "Held while the camera leaves it").
 /// - Hidden (SystemParams::hold_occluded_objects): any other object whose
 ///   model, as drawn at its last pose (its rendering of the last frame),
 ///   covers at least keep_mask_pixels inside the border and is more often
@@ -237,7 +253,7 @@ struct HeldPose {
 /// frames with young objects or an object the cover finds behind others.
 template <class S, Backend B>
 std::vector<std::optional<HeldPose<S>>> hold_decisions(Map<S, B>& map, const Frame<S, B>& frame,
-                                                       const SystemParams<S>& params,
+                                                       const PinholeCamera<S>& camera, const SystemParams<S>& params,
                                                        const std::vector<SE3<S>>& before, double timestamp,
                                                        ObjectPixelsWorkspace<S, B>* workspace = nullptr,
                                                        DrawnCoverWorkspace<S, B>* cover_workspace = nullptr) {
@@ -247,7 +263,8 @@ std::vector<std::optional<HeldPose<S>>> hold_decisions(Map<S, B>& map, const Fra
   bool any_young = false;
   for (const auto& o : map.objects) any_young = any_young || map.is_young(o->id());
   const bool young_rule = params.hold_unseen_objects && any_young;
-  if (!young_rule && !params.hold_occluded_objects) return held;
+  const bool leaving_rule = params.leaving_share > S(0);
+  if (!young_rule && !params.hold_occluded_objects && !leaving_rule) return held;
   const int border = params.visibility_border_for(frame.segmentation.width());
   const int min_pixels = params.keep_mask_pixels_for(frame.segmentation.width(), frame.segmentation.height());
   // The hidden rule: more of its model is behind a nearer surface than
@@ -294,21 +311,55 @@ std::vector<std::optional<HeldPose<S>>> hold_decisions(Map<S, B>& map, const Fra
     const bool cut = 2 * px.associated_inner < px.associated, gone = px.associated < params.min_object_terms;
     return px.associated_inner < min_pixels && (cut || gone);
   };
-  const Trajectory& camera = map.camera_trajectory;
+  const Trajectory& trajectory = map.camera_trajectory;
+  // The leaving rule: standing still, too little of its extent in view to
+  // align it, and the frame still shows it where it stands: of its model's
+  // pixels, cast at its last pose from this frame's camera, that no nearer
+  // surface covers, at least two in three within likelihood.sigma of the
+  // frame's (one that starts to move while held is tracked again), unless
+  // fewer than keep_mask_pixels are left to tell (a sliver's edges disagree
+  // with any model). The cast only for objects that pass the first two.
+  RaycastResult<S, B> cast;
+  DrawnCoverWorkspace<S, B> cast_cover;
+  const auto still_shown = [&](const ObjectModel<S, B>& o, const SE3<S>& T_world_object) {
+    const SE3<S> T_volume_camera = (T_world_object * o.T_object_volume()).inverse() * map.T_world_camera;
+    RaycastParams<S> rp;
+    rp.surface = false;
+    raycast(o.volume(), camera, o.volume().pose() * T_volume_camera, cast, rp, &o.foreground());
+    const std::vector<detail::lifecycle::DrawnModel<S>> one{
+        {std::as_const(cast.hit).view(), std::as_const(cast.depth).view()}};
+    const detail::lifecycle::DrawnCover c =
+        reduce_per_group(frame.points.backend(), one, frame.points.size(),
+                         detail::lifecycle::AddCoverPixel<S>{frame.points.view(), border, params.likelihood.sigma},
+                         detail::lifecycle::CoverSums{}, cast_cover)[0]
+            .counts();
+    const int open = c.drawn - c.front;
+    return open < min_pixels || 3 * c.agree >= 2 * open;
+  };
+  const auto leaving = [&](int k) {
+    if (!leaving_rule || trajectory.empty()) return false;
+    const ObjectModel<S, B>& o = *map.objects[std::size_t(k)];
+    const SE3<S>& pose = before[std::size_t(k)];
+    return standing_still(map.record_of(o.id()).trajectory, trajectory.back().timestamp, 0.2,
+                          double(params.leaving_still.translation),
+                          double(params.leaving_still.rotation_degrees) * std::numbers::pi / 180.0) &&
+           shows_less_than(o, pose, map.T_world_camera, camera, border, double(params.leaving_share)) &&
+           still_shown(o, pose);
+  };
   for (int k = 0; k < n; ++k) {
     const ObjectModel<S, B>& o = *map.objects[std::size_t(k)];
     const bool young = map.is_young(o.id());
     ObjectRecord& record = map.record_of(o.id());
     std::optional<HeldPose<S>>& h = held[std::size_t(k)];
-    if (young && young_rule && unseen(k)) {
+    if ((young && young_rule && unseen(k)) || (!young && leaving(k))) {
       h = HeldPose<S>{before[std::size_t(k)], TrackingOutcome::not_tracked};
     } else if (!young && params.hold_occluded_objects && hidden(k)) {
       h = HeldPose<S>{before[std::size_t(k)], TrackingOutcome::moved_on};
       // From its pose of the last frame (a frame or two dropped between:
       // still within a second), while it was tracked at most
       // hidden_moving_seconds ago.
-      if (!camera.empty()) {
-        const double last = camera.back().timestamp;
+      if (!trajectory.empty()) {
+        const double last = trajectory.back().timestamp;
         if (std::isnan(record.hidden_since)) record.hidden_since = last;
         if (timestamp - record.hidden_since <= double(params.hidden_moving_seconds))
           if (const std::optional<SE3<double>> p = carry_on(record.trajectory, last, timestamp, 1.0))

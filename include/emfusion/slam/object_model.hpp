@@ -1,6 +1,7 @@
 // One object of the EM-Fusion map: its TSDF and foreground counts, its pose,
 // existence counts and class scores, and resizing that keeps the voxel size
-// and the grid alignment (paper sec. 3.5).
+// and the grid alignment (paper sec. 3.5); and how much of it a camera has
+// in view (shows_less_than: too little of it to align).
 //
 // Frames: the object frame is fixed to the object (its origin is the centre
 // of the volume it was created with); the volume frame (corner of the grid)
@@ -12,9 +13,11 @@
 #include <cmath>
 #include <cstdint>
 #include <string>
+#include <type_traits>
 #include <utility>
 #include <vector>
 
+#include "emfusion/core/camera.hpp"
 #include "emfusion/core/parallel.hpp"
 #include "emfusion/core/se3.hpp"
 #include "emfusion/volume/foreground.hpp"
@@ -203,4 +206,74 @@ class ObjectModel {
   int existence_ = 1;  // the detection that created it
   int non_existence_ = 0;
 };
+
+namespace detail::object_model {
+/// The one-voxel box of voxel i where the object's surface is (observed,
+/// |sdf| at most a voxel, Fg > Bg), else an empty one.
+template <class S, class Store>
+struct SurfaceVoxel {
+  TsdfView<S, const Store> tsdf;
+  ForegroundView<S, const float> counts;
+  EMF_HD VoxelBox operator()(std::int64_t i) const {
+    if (!(S(tsdf.weight[i]) > S(0)) || !(std::fabs(S(tsdf.sdf[i])) <= tsdf.voxel_size) ||
+        !(S(counts.fg[i]) > S(counts.bg[i])))
+      return VoxelBox{};
+    const std::int64_t plane = std::int64_t(tsdf.nx) * tsdf.ny;
+    const int x = int(i % tsdf.nx), y = int((i / tsdf.nx) % tsdf.ny), z = int(i / plane);
+    return VoxelBox{Vec3i{{x, y, z}}, Vec3i{{x + 1, y + 1, z + 1}}};
+  }
+};
+
+/// The share of the voxel box `box` of object `o` at T_world_object that a
+/// camera at T_world_camera sees inside the image less `border` pixels:
+/// of the rectangle around the projections of its eight corners, the part
+/// inside over the whole. 1 when a corner is not in front of the camera
+/// (the box may cover any part of the view) or the box is empty.
+template <class S, Backend B>
+double box_share(const ObjectModel<S, B>& o, const VoxelBox& box, const SE3<S>& T_world_object,
+                 const SE3<S>& T_world_camera, const PinholeCamera<S>& camera, int border) {
+  if (box.empty()) return 1.0;
+  const S vs = o.volume().voxel_size();
+  const SE3<S> T_camera_volume = T_world_camera.inverse() * T_world_object * o.T_object_volume();
+  double u0 = 1e300, u1 = -1e300, v0 = 1e300, v1 = -1e300;
+  for (int k = 0; k < 8; ++k) {
+    const Vec3<S> corner =
+        vec3(S(k & 1 ? box.hi[0] : box.lo[0]), S(k & 2 ? box.hi[1] : box.lo[1]), S(k & 4 ? box.hi[2] : box.lo[2])) * vs;
+    const Vec3<S> p = T_camera_volume * corner;
+    if (!(p.z() > S(1e-3)) || !std::isfinite(double(p.x())) || !std::isfinite(double(p.y()))) return 1.0;
+    const double u = double(camera.fx) * double(p.x()) / double(p.z()) + double(camera.cx);
+    const double v = double(camera.fy) * double(p.y()) / double(p.z()) + double(camera.cy);
+    u0 = std::min(u0, u), u1 = std::max(u1, u), v0 = std::min(v0, v), v1 = std::max(v1, v);
+  }
+  const double whole = (u1 - u0) * (v1 - v0);
+  if (!(whole > 0)) return 1.0;
+  const double w = std::min(u1, double(camera.width - border)) - std::max(u0, double(border));
+  const double h = std::min(v1, double(camera.height - border)) - std::max(v0, double(border));
+  return w > 0 && h > 0 ? w * h / whole : 0.0;
+}
+}  // namespace detail::object_model
+
+/// True when less than `share` of object `o`'s extent, at T_world_object,
+/// lies inside the image less `border` pixels as a camera at
+/// T_world_camera sees it: the share of the rectangle around its surface's
+/// projection (the box of voxels on its surface, observed and of p_fg >
+/// 1/2) inside (box_share). The box of its foreground counts (majority_box,
+/// cached, holding the surface's) is tried first: an object with at least
+/// `share` of that box in view is taken as in view without a pass over its
+/// volume for the surface's box.
+template <class S, Backend B>
+bool shows_less_than(const ObjectModel<S, B>& o, const SE3<S>& T_world_object, const SE3<S>& T_world_camera,
+                     const PinholeCamera<S>& camera, int border, double share) {
+  const auto in_view = [&](const VoxelBox& box) {
+    return detail::object_model::box_share(o, box, T_world_object, T_world_camera, camera, border);
+  };
+  if (in_view(o.foreground().majority_box()) >= share) return false;
+  const auto& v = o.volume().view();
+  const VoxelBox surface = transform_reduce_index(
+      o.volume().backend(), v.voxel_count(),
+      detail::object_model::SurfaceVoxel<S, std::remove_cvref_t<decltype(*v.sdf)>>{v, o.foreground().view()},
+      VoxelBox{}, detail::UniteVoxelBoxes{});
+  return in_view(surface) < share;
+}
+
 }  // namespace emfusion

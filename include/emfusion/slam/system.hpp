@@ -264,7 +264,7 @@ class System {
       // Objects the frame does not show well enough are held, not solved.
       std::vector<SE3<S>> before;
       for (const PoseStarts<S>& s : object_starts) before.push_back(s.previous);
-      const auto held = hold_decisions(map_, frame_, params_, before, timestamp, &object_pixels_workspace_,
+      const auto held = hold_decisions(map_, frame_, camera_, params_, before, timestamp, &object_pixels_workspace_,
                                        &drawn_cover_workspace_);
       std::vector<bool> skip;
       for (const auto& h : held) skip.push_back(h.has_value());
