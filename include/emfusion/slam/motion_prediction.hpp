@@ -9,6 +9,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstddef>
 #include <optional>
 
 #include "emfusion/core/se3.hpp"
@@ -43,6 +44,19 @@ inline std::optional<SE3<double>> predict_pose(const Trajectory& trajectory, dou
   return constant_velocity(trajectory[n - 2], trajectory[n - 1], timestamp);
 }
 
+namespace detail {
+/// The index of the first pose of `trajectory` within the `window` seconds
+/// up to `last`, when its last pose is at `last` and the one before lies in
+/// that window too (at least two poses there); else nothing.
+inline std::optional<std::size_t> window_start(const Trajectory& trajectory, double last, double window) {
+  const std::size_t n = trajectory.size();
+  if (n < 2 || trajectory[n - 1].timestamp != last || trajectory[n - 2].timestamp < last - window) return std::nullopt;
+  std::size_t first = n - 2;
+  while (first > 0 && trajectory[first - 1].timestamp >= last - window) --first;
+  return first;
+}
+}  // namespace detail
+
 /// Where an object last estimated at `last` (the time of its trajectory's
 /// last pose, else nothing) is at `timestamp`, up to `max_seconds` later
 /// (else nothing), if it goes on at the mean velocity of its poses over the
@@ -53,13 +67,10 @@ inline std::optional<SE3<double>> predict_pose(const Trajectory& trajectory, dou
 /// small turn does not bend its path over many frames.
 inline std::optional<SE3<double>> carry_on(const Trajectory& trajectory, double last, double timestamp,
                                            double max_seconds, double window = 0.2) {
-  const std::size_t n = trajectory.size();
   const double ahead = timestamp - last;
-  if (n < 2 || trajectory[n - 1].timestamp != last || !(ahead > 0) || !(ahead <= max_seconds)) return std::nullopt;
-  std::size_t first = n - 2;
-  if (trajectory[first].timestamp < last - window) return std::nullopt;
-  while (first > 0 && trajectory[first - 1].timestamp >= last - window) --first;
-  const TimedPose &a = trajectory[first], &b = trajectory[n - 1];
+  const std::optional<std::size_t> first = detail::window_start(trajectory, last, window);
+  if (!first || !(ahead > 0) || !(ahead <= max_seconds)) return std::nullopt;
+  const TimedPose &a = trajectory[*first], &b = trajectory.back();
   const double span = b.timestamp - a.timestamp;
   if (!(span > 0) || !std::isfinite(span)) return std::nullopt;
   const double s = ahead / span;
@@ -74,13 +85,11 @@ inline std::optional<SE3<double>> carry_on(const Trajectory& trajectory, double 
 /// there, else false: nothing says it stands still).
 inline bool standing_still(const Trajectory& trajectory, double last, double window, double max_translation,
                            double max_rotation) {
-  const std::size_t n = trajectory.size();
-  if (n < 2 || trajectory[n - 1].timestamp != last || trajectory[n - 2].timestamp < last - window) return false;
-  std::size_t first = n - 2;
-  while (first > 0 && trajectory[first - 1].timestamp >= last - window) --first;
-  const SE3<double> moved = trajectory[first].pose.inverse() * trajectory[n - 1].pose;
-  return norm(trajectory[n - 1].pose.translation() - trajectory[first].pose.translation()) <= max_translation &&
-         norm(so3_log(moved.rotation())) <= max_rotation;
+  const std::optional<std::size_t> first = detail::window_start(trajectory, last, window);
+  if (!first) return false;
+  const SE3<double> &a = trajectory[*first].pose, &b = trajectory.back().pose;
+  return norm(b.translation() - a.translation()) <= max_translation &&
+         norm(so3_log((a.inverse() * b).rotation())) <= max_rotation;
 }
 
 }  // namespace emfusion

@@ -218,9 +218,7 @@ struct SurfaceVoxel {
     if (!(S(tsdf.weight[i]) > S(0)) || !(std::fabs(S(tsdf.sdf[i])) <= tsdf.voxel_size) ||
         !(S(counts.fg[i]) > S(counts.bg[i])))
       return VoxelBox{};
-    const std::int64_t plane = std::int64_t(tsdf.nx) * tsdf.ny;
-    const int x = int(i % tsdf.nx), y = int((i / tsdf.nx) % tsdf.ny), z = int(i / plane);
-    return VoxelBox{Vec3i{{x, y, z}}, Vec3i{{x + 1, y + 1, z + 1}}};
+    return emfusion::detail::voxel_box_at(i, tsdf.nx, tsdf.ny);
   }
 };
 

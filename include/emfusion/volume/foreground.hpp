@@ -75,15 +75,20 @@ struct VoxelBox {
 };
 
 namespace detail {
+/// The box of the one voxel at index i (x-fastest) of an nx x ny x nz grid.
+EMF_HD inline VoxelBox voxel_box_at(std::int64_t i, int nx, int ny) {
+  const std::int64_t plane = std::int64_t(nx) * ny;
+  const int x = int(i % nx), y = int((i / nx) % ny), z = int(i / plane);
+  return VoxelBox{Vec3i{{x, y, z}}, Vec3i{{x + 1, y + 1, z + 1}}};
+}
+
 /// The one-voxel box of voxel i where Fg > Bg, else an empty one.
 template <class S, class Count>
 struct MajorityVoxel {
   ForegroundView<S, const Count> counts;
   EMF_HD VoxelBox operator()(std::int64_t i) const {
     if (!(S(counts.fg[i]) > S(counts.bg[i]))) return VoxelBox{};
-    const std::int64_t plane = std::int64_t(counts.nx) * counts.ny;
-    const int x = int(i % counts.nx), y = int((i / counts.nx) % counts.ny), z = int(i / plane);
-    return VoxelBox{Vec3i{{x, y, z}}, Vec3i{{x + 1, y + 1, z + 1}}};
+    return voxel_box_at(i, counts.nx, counts.ny);
   }
 };
 struct UniteVoxelBoxes {
