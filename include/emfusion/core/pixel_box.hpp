@@ -8,6 +8,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <optional>
 
 #include "emfusion/core/backend.hpp"
 #include "emfusion/core/camera.hpp"
@@ -37,33 +38,50 @@ struct PixelBox {
   }
 };
 
-/// The pixels of `camera` whose rays can meet the box [lo, hi] (a volume's
-/// extent in its own frame) seen at T_camera_box: the rectangle around the
-/// projections of its eight corners, one pixel wider each way (rounding),
-/// within the image. A box with a corner closer to the camera's plane than
-/// `min_z` (or behind it) may cover any pixel: the whole image. Exact for
-/// what it promises: a ray outside the rectangle misses the box, and a point
-/// of the box projects (rounded to the nearest pixel) inside it.
-template <class S>
-PixelBox projected_box(const PinholeCamera<S>& camera, const SE3<S>& T_camera_box, const Vec3<S>& lo,
-                       const Vec3<S>& hi, S min_z = S(1e-3)) {
-  const PixelBox whole = PixelBox::whole(camera.width, camera.height);
+/// A rectangle in pixel coordinates, neither rounded nor clipped to an image.
+struct PixelRect {
   double u_min = 1e300, u_max = -1e300, v_min = 1e300, v_max = -1e300;
+};
+
+/// The rectangle around the projections of the eight corners of the box
+/// [lo, hi] (in its own frame) seen at T_camera_box; nothing when a corner
+/// is closer to the camera's plane than `min_z` (or behind it) or does not
+/// project to a finite point: then the box may cover any part of the view.
+template <class S>
+std::optional<PixelRect> projected_rect(const PinholeCamera<S>& camera, const SE3<S>& T_camera_box, const Vec3<S>& lo,
+                                        const Vec3<S>& hi, S min_z = S(1e-3)) {
+  PixelRect r;
   for (int k = 0; k < 8; ++k) {
     const Vec3<S> corner = vec3(k & 1 ? hi.x() : lo.x(), k & 2 ? hi.y() : lo.y(), k & 4 ? hi.z() : lo.z());
     const Vec3<S> p = T_camera_box * corner;
-    if (!(p.z() >= min_z) || !std::isfinite(double(p.x())) || !std::isfinite(double(p.y()))) return whole;
+    if (!(p.z() >= min_z) || !std::isfinite(double(p.x())) || !std::isfinite(double(p.y()))) return std::nullopt;
     const double u = double(camera.fx) * double(p.x()) / double(p.z()) + double(camera.cx);
     const double v = double(camera.fy) * double(p.y()) / double(p.z()) + double(camera.cy);
-    u_min = std::min(u_min, u), u_max = std::max(u_max, u);
-    v_min = std::min(v_min, v), v_max = std::max(v_max, v);
+    r.u_min = std::min(r.u_min, u), r.u_max = std::max(r.u_max, u);
+    r.v_min = std::min(r.v_min, v), r.v_max = std::max(r.v_max, v);
   }
+  return r;
+}
+
+/// The pixels of `camera` whose rays can meet the box [lo, hi] (a volume's
+/// extent in its own frame) seen at T_camera_box: the rectangle around the
+/// projections of its eight corners (projected_rect), one pixel wider each
+/// way (rounding), within the image. A box with a corner closer to the
+/// camera's plane than `min_z` (or behind it) may cover any pixel: the
+/// whole image. Exact for what it promises: a ray outside the rectangle
+/// misses the box, and a point of the box projects (rounded to the nearest
+/// pixel) inside it.
+template <class S>
+PixelBox projected_box(const PinholeCamera<S>& camera, const SE3<S>& T_camera_box, const Vec3<S>& lo, const Vec3<S>& hi,
+                       S min_z = S(1e-3)) {
+  const std::optional<PixelRect> r = projected_rect(camera, T_camera_box, lo, hi, min_z);
+  if (!r) return PixelBox::whole(camera.width, camera.height);
   // Outside the image on one side: nothing to do (an empty box).
-  if (u_max < -1.0 || v_max < -1.0 || u_min > camera.width || v_min > camera.height) return PixelBox{};
+  if (r->u_max < -1.0 || r->v_max < -1.0 || r->u_min > camera.width || r->v_min > camera.height) return PixelBox{};
   const auto lower = [](double x, int size) { return int(std::clamp(std::floor(x) - 1.0, 0.0, double(size))); };
   const auto upper = [](double x, int size) { return int(std::clamp(std::ceil(x) + 2.0, 0.0, double(size))); };
-  return PixelBox{lower(u_min, camera.width), lower(v_min, camera.height), upper(u_max, camera.width),
-                  upper(v_max, camera.height)};
+  return PixelBox{lower(r->u_min, camera.width), lower(r->v_min, camera.height), upper(r->u_max, camera.width),
+                  upper(r->v_max, camera.height)};
 }
 
 namespace detail {

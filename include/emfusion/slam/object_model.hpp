@@ -12,6 +12,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <optional>
 #include <string>
 #include <type_traits>
 #include <utility>
@@ -19,6 +20,7 @@
 
 #include "emfusion/core/camera.hpp"
 #include "emfusion/core/parallel.hpp"
+#include "emfusion/core/pixel_box.hpp"
 #include "emfusion/core/se3.hpp"
 #include "emfusion/volume/foreground.hpp"
 #include "emfusion/volume/raycast.hpp"
@@ -232,21 +234,14 @@ double box_share(const ObjectModel<S, B>& o, const VoxelBox& box, const SE3<S>& 
                  const SE3<S>& T_world_camera, const PinholeCamera<S>& camera, int border) {
   if (box.empty()) return 1.0;
   const S vs = o.volume().voxel_size();
-  const SE3<S> T_camera_volume = T_world_camera.inverse() * T_world_object * o.T_object_volume();
-  double u0 = 1e300, u1 = -1e300, v0 = 1e300, v1 = -1e300;
-  for (int k = 0; k < 8; ++k) {
-    const Vec3<S> corner =
-        vec3(S(k & 1 ? box.hi[0] : box.lo[0]), S(k & 2 ? box.hi[1] : box.lo[1]), S(k & 4 ? box.hi[2] : box.lo[2])) * vs;
-    const Vec3<S> p = T_camera_volume * corner;
-    if (!(p.z() > S(1e-3)) || !std::isfinite(double(p.x())) || !std::isfinite(double(p.y()))) return 1.0;
-    const double u = double(camera.fx) * double(p.x()) / double(p.z()) + double(camera.cx);
-    const double v = double(camera.fy) * double(p.y()) / double(p.z()) + double(camera.cy);
-    u0 = std::min(u0, u), u1 = std::max(u1, u), v0 = std::min(v0, v), v1 = std::max(v1, v);
-  }
-  const double whole = (u1 - u0) * (v1 - v0);
+  const std::optional<PixelRect> r = projected_rect(
+      camera, T_world_camera.inverse() * T_world_object * o.T_object_volume(),
+      vec3(S(box.lo[0]), S(box.lo[1]), S(box.lo[2])) * vs, vec3(S(box.hi[0]), S(box.hi[1]), S(box.hi[2])) * vs);
+  if (!r) return 1.0;
+  const double whole = (r->u_max - r->u_min) * (r->v_max - r->v_min);
   if (!(whole > 0)) return 1.0;
-  const double w = std::min(u1, double(camera.width - border)) - std::max(u0, double(border));
-  const double h = std::min(v1, double(camera.height - border)) - std::max(v0, double(border));
+  const double w = std::min(r->u_max, double(camera.width - border)) - std::max(r->u_min, double(border));
+  const double h = std::min(r->v_max, double(camera.height - border)) - std::max(r->v_min, double(border));
   return w > 0 && h > 0 ? w * h / whole : 0.0;
 }
 }  // namespace detail::object_model
