@@ -50,10 +50,13 @@ template <class S>
 struct BoxScene {
   PinholeCamera<S> camera;
   sim::Scene<S> scene;
-  explicit BoxScene(const Vec3<S>& box_center = vec3(S(0), S(0), S(1.2)), int scale = 1, bool slats = false)
+  /// `turn`: a rotation of the box about its centre (in the world frame).
+  explicit BoxScene(const Vec3<S>& box_center = vec3(S(0), S(0), S(1.2)), int scale = 1, bool slats = false,
+                    const Mat3<S>& turn = Mat3<S>::identity())
       : camera{S(140 * scale), S(140 * scale), S(80 * scale - 0.5), S(60 * scale - 0.5), 160 * scale, 120 * scale} {
     scene.add(sim::make_plane(sim::look_at(vec3(S(0), S(0), S(2)), Vec3<S>::zero(), vec3(S(0), S(-1), S(0)))));
-    scene.add(sim::make_box(SE3<S>(so3_exp(vec3(S(0.2), S(0.4), S(0))), box_center), vec3(S(0.15), S(0.1), S(0.12))));
+    scene.add(
+        sim::make_box(SE3<S>(turn * so3_exp(vec3(S(0.2), S(0.4), S(0))), box_center), vec3(S(0.15), S(0.1), S(0.12))));
     const double slat_x[6] = {-1.2, -0.65, 0.55, 1.1, 1.65, 2.2};
     for (int k = 0; slats && k < 6; ++k) {
       const Vec3<S> at = vec3(S(slat_x[k]), k % 2 ? S(0.3) : S(-0.3), S(1.97));
@@ -1107,12 +1110,19 @@ TEMPLATE_LIST_TEST_CASE("A lost object back in view elsewhere is found in what n
   using S = typename TestType::Scalar;
   using B = typename TestType::Backend;
   // On, off, and on for an object detected on one detector frame only
-  // (a false positive is seldom seen twice: such an object is not looked for).
-  const int mode = GENERATE(0, 1, 2);
-  const bool unexplained = mode == 0;
+  // (a false positive is seldom seen twice: such an object is not looked for);
+  // then on for a box that also turned a quarter turn about the viewing
+  // direction (3): the fits from its kept orientation placed at the group
+  // find it turned once enough of it shows. (Re-identification's 23
+  // turned starts, tried here when no fit was shown, found it 85 degrees
+  // off from the border-cut group three frames sooner: docs/decisions.md,
+  // "No turned starts for what no model explains".)
+  const int mode = GENERATE(0, 1, 2, 3);
+  const bool unexplained = mode == 0 || mode == 3;
   SystemParams<S> params = small_params<S>();
   params.min_association = 0;  // as the test above
   params.refind_unexplained_every = mode == 1 ? 0 : 1;
+  const Mat3<S> turn = mode == 3 ? so3_exp(vec3(S(0), S(0), S(1.5707963267948966))) : Mat3<S>::identity();
   // (With leaving_share the box is lost where it stood, and the fit from
   // there to the first border-cut view of it put it 10 cm off in float on
   // the CPU, tracked there after; lost where its last frames in view slid
@@ -1130,9 +1140,18 @@ TEMPLATE_LIST_TEST_CASE("A lost object back in view elsewhere is found in what n
   // lost, its model shows the wall: refind_in_view does not find it); the
   // camera pans back, without a detection, and sees it again about 20
   // frames later (0.67 s: it can have gone 0.67 m at refind_unexplained_speed).
-  const BoxScene<S> moved(vec3(S(-0.3), S(0), S(1.2)), 1, true);
+  const BoxScene<S> moved(vec3(S(-0.3), S(0), S(1.2)), 1, true, turn);
   const int found_at = pan_back_until_found(sys, moved, k, FoundBy::unexplained);
-  INFO("lost at pan step " << k << ", found at step " << found_at);
+  INFO("mode " << mode << ": lost at pan step " << k << ", found at step " << found_at);
+  // The object's pose against the camera's, and where the box's move (a
+  // turn about its centre, then 0.3 m to the left) put it: the camera is
+  // back at the start when the pan ends.
+  const auto relative = [&] { return sys.camera_pose().inverse() * sys.objects()[0]->pose(); };
+  const SE3<S> expected =
+      SE3<S>(turn, vec3(S(-0.3), S(0), S(1.2))) * SE3<S>::translation(vec3(S(0), S(0), S(-1.2))) * start;
+  const auto degrees_off = [&] {
+    return double(norm(so3_log(relative().rotation() * expected.rotation().transpose()))) * 180 / 3.14159265358979;
+  };
   if (unexplained) {
     CHECK(found_at > 0);
     REQUIRE(sys.objects().size() == 1);
@@ -1149,9 +1168,10 @@ TEMPLATE_LIST_TEST_CASE("A lost object back in view elsewhere is found in what n
       if (shape[i] == 1) box.push_back(int(i));
     CHECK(detail::unexplained::cut_by_border(box, moved.camera.width, moved.camera.height,
                                              params.visibility_border_for(moved.camera.width)));
-    // Tracked to where the box is now (within 1.5 cm).
-    const Vec3<S> shift = (sys.camera_pose().inverse() * sys.objects()[0]->pose()).translation() - start.translation();
-    CHECK(double(norm(shift - vec3(S(-0.3), S(0), S(0)))) < 0.015);
+    // Tracked to where the box is now (within 1.5 cm), turned as it is.
+    CHECK(double(norm(relative().translation() - expected.translation())) < 0.015);
+    INFO(degrees_off() << " degrees off");
+    CHECK(degrees_off() < 10);  // a wrong turn is 60 degrees or more
   } else {
     CHECK(found_at < 0);
     CHECK(sys.objects().empty());
