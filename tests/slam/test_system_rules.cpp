@@ -922,8 +922,9 @@ TEMPLATE_LIST_TEST_CASE("A young object the frame no longer shows at all is lost
   // The box at the right edge, created from its detection with fewer than
   // 100 px inside the border (young: the grace keeps it). The camera then
   // turns away from it, 0.005 rad a frame (about 0.7 px), and no detector
-  // runs again: once the frame neither draws nor associates it anywhere,
-  // its grace ends and it is lost as not visible at once.
+  // runs again: once the frame neither draws nor associates it on any
+  // pixel inside the visibility border (or on min_object_terms pixels
+  // anywhere), its grace ends and it is lost as not visible at once.
   const S x = box_x_at_border<S>();
   REQUIRE(x < S(0.9));
   const SystemParams<S> params = small_params<S>();
@@ -933,23 +934,33 @@ TEMPLATE_LIST_TEST_CASE("A young object the frame no longer shows at all is lost
   const BoxScene<S>& scene = first.scene;
   System<S, B>& sys = first.system;
   int deleted_at = -1, gone_at = -1;  // gone: none of the box in the frame
-  std::ptrdiff_t shown_then = -1;     // the box's pixels in the frame it was deleted in
+  int out_at = -1;                    // none of it inside the visibility border
+  // The box's pixels in the frame it was deleted in, and those inside the
+  // visibility border.
+  std::ptrdiff_t shown_then = -1, inside_then = -1;
+  const int border = params.visibility_border_for(scene.camera.width);
   for (int k = 1; k <= 40 && deleted_at < 0; ++k) {
     Image<int, Host> seen;
     const SE3<S> away(so3_exp(vec3(S(0), S(-0.005) * S(k), S(0))), Vec3<S>::zero());
     const FrameResult r = sys.process(scene.template depth<B>(away, &seen), k / 30.0);
     const std::vector<int> l = seen.to_host();
     const std::ptrdiff_t shown = std::count(l.begin(), l.end(), 1);
+    std::ptrdiff_t inside = 0;
+    for (std::size_t i = 0; i < l.size(); ++i) inside += l[i] == 1 && seen.view().inside_border(int(i), border);
     if (shown == 0 && gone_at < 0) gone_at = k;
+    if (inside == 0 && out_at < 0) out_at = k;
     if (!r.deleted.empty()) {
       CHECK(r.deleted == std::vector<int>{1});
-      deleted_at = k, shown_then = shown;
+      deleted_at = k, shown_then = shown, inside_then = inside;
     }
   }
-  INFO("deleted at step " << deleted_at << " with " << shown_then << " px of the box in the frame; none from step "
-                          << gone_at);
+  INFO("deleted at step " << deleted_at << " with " << shown_then << " px of the box in the frame, " << inside_then
+                          << " inside the border; none from step " << gone_at << ", none inside from step " << out_at);
   REQUIRE(deleted_at > 0);
-  CHECK(shown_then < params.min_object_terms);  // not while the frame showed enough of it to track
+  // Not while the frame showed enough of it to track, and no later than
+  // the first frame without a pixel of it inside the border.
+  CHECK((shown_then < params.min_object_terms || inside_then == 0));
+  CHECK((out_at < 0 || deleted_at <= out_at));
   CHECK((gone_at < 0 || deleted_at <= gone_at));
   CHECK(sys.object_records()[0].reason == DeletionReason::not_visible);
   CHECK(sys.map().lost.size() == 1);  // kept, to be found again

@@ -427,7 +427,8 @@ ObjectStatus object_status(const Map<S, B>& map, const Frame<S, B>& frame, int k
 /// beyond lost_object_frames and max_lost_objects, and renews the grace of
 /// young objects on detector frames. A young object's grace ends when it is
 /// visible, or when the frame neither draws it nor associates it on
-/// min_object_terms pixels anywhere (it has left the view: lost at once).
+/// min_object_terms pixels anywhere or on any pixel inside the visibility
+/// border (it has left the view: lost at once).
 /// `tracked`: tracking ran this frame, so association images exist for
 /// every object that existed before it.
 /// `workspace` (optional) keeps the buffers of the objects' pixel counts.
@@ -451,9 +452,11 @@ void delete_objects(Map<S, B>& map, const Frame<S, B>& frame, const SystemParams
     const bool visible = status.visible_pixels >= min_pixels;
     // The grace is for an object the frame shows too little of to count
     // as visible, not for one it shows nothing of: one neither drawn nor
-    // associated on min_object_terms pixels anywhere has left the view.
+    // associated on min_object_terms pixels anywhere, or on any pixel
+    // inside the visibility border, has left the view.
     const ObjectPixels& px = pixels[std::size_t(k)];
-    if (px.associated < params.min_object_terms && px.rendered < params.min_object_terms)
+    if ((px.associated < params.min_object_terms && px.rendered < params.min_object_terms) ||
+        (px.associated_inner == 0 && px.rendered_inner == 0))
       std::erase(map.young, o.id());
     if (detector_frame && o.existence_probability() < params.min_existence)
       why[std::size_t(k)] = DeletionReason::existence;

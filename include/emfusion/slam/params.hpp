@@ -197,7 +197,8 @@ struct SystemParams {
   /// again: one that enters the view across the image border would
   /// otherwise go on the next frame. Not one of which the frame shows
   /// nothing (fewer than min_object_terms pixels drawn and associated,
-  /// border band included): that one has left the view and is lost at once.
+  /// border band included, or none inside the visibility border): that one
+  /// has left the view and is lost at once.
   bool young_object_grace = true;
   /// During that grace, an object the frame shows cut by the image border
   /// or no longer shows (fewer than keep_mask_pixels of its E-step
