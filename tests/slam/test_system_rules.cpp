@@ -1127,7 +1127,7 @@ TEMPLATE_LIST_TEST_CASE("A lost object back in view elsewhere is found in what n
   // find it turned once enough of it shows. (Re-identification's 23
   // turned starts, tried here when no fit was shown, found it 85 degrees
   // off from the border-cut group three frames sooner: docs/decisions.md,
-  // "No turned starts for what no model explains".)
+  // "Turned fits for groups of unexplained pixels".)
   const int mode = GENERATE(0, 1, 2, 3);
   const bool unexplained = mode == 0 || mode == 3;
   SystemParams<S> params = small_params<S>();
