@@ -429,6 +429,70 @@ def run_reference(args, base, n, path):
     return 'track_camera %s:%d' % (base, n), 'ok' if rc == 0 else 'failed rc %d, see %s.log' % (rc, path), dt
 
 
+def movers_removed_path(work, s, backend):
+    """Where track_camera's trajectory on composite s with its movers' pixels removed
+    (run_movers_removed) is written, one per composite; None for a synthetic room."""
+    if s['kind'] != 'composite':
+        return None
+    return os.path.join(work, 'runs', backend, 'track_camera', '%s-movers-removed.txt' % s['name'])
+
+
+def remove_movers(depth, labels):
+    """A copy of depth image `depth` with no measurement (0) wherever the ground-truth label
+    image `labels` of the same frame shows a mover (label > 0)."""
+    if depth.shape != labels.shape:
+        raise ValueError('depth %s and labels %s differ in size' % (depth.shape, labels.shape))
+    out = depth.copy()
+    out[labels > 0] = 0
+    return out
+
+
+def write_movers_removed(seq, dst):
+    """A sequence folder at dst that is `seq` with every mover's pixels taken out of its depth
+    (remove_movers with masks_gt/ of the same file name): every entry of seq linked, but depth/,
+    written anew. Needs cv2."""
+    import cv2
+    os.makedirs(os.path.join(dst, 'depth'))
+    for e in os.listdir(seq):
+        if e != 'depth':
+            os.symlink(os.path.join(seq, e), os.path.join(dst, e))
+    for fn in sorted(os.listdir(os.path.join(seq, 'depth'))):
+        dp, lp = os.path.join(seq, 'depth', fn), os.path.join(seq, 'masks_gt', fn)
+        if not os.path.isfile(lp):
+            raise SystemExit('%s: no ground-truth mask for %s' % (lp, dp))
+        depth, labels = cv2.imread(dp, cv2.IMREAD_UNCHANGED), cv2.imread(lp, cv2.IMREAD_UNCHANGED)
+        if depth is None or labels is None:
+            raise SystemExit('cannot read %s' % (lp if depth is not None else dp))
+        try:
+            out = remove_movers(depth, labels)
+        except ValueError as e:
+            raise SystemExit('%s against %s: %s' % (dp, lp, e))
+        if not cv2.imwrite(os.path.join(dst, 'depth', fn), out):
+            raise SystemExit('cannot write %s' % os.path.join(dst, 'depth', fn))
+
+
+def run_movers_removed(args, s, path):
+    """track_camera (its defaults) on composite s with the depth of its movers' pixels removed (the
+    ground-truth masks): the camera ATE of a tracker told exactly which pixels move, which only the
+    background the movers hide keeps from the base frames' reference. Not a target: the report's
+    info line. The copy of the sequence lives beside `path` while it runs."""
+    os.makedirs(os.path.dirname(path), exist_ok=True)
+    name = 'track_camera %s without its movers' % s['name']
+    tmp = path + '.seq'
+    t0 = time.time()
+    subprocess.run(['rm', '-rf', '--', tmp], check=True)
+    try:
+        write_movers_removed(seq_dir(args.work, s), tmp)
+        rc, _ = run_logged([args.track_camera, tmp, path, '--backend', args.backend], path + '.log')
+    except SystemExit as e:  # a sequence that cannot be copied fails this run, not the others
+        return name, 'failed: %s' % e, time.time() - t0
+    finally:
+        subprocess.run(['rm', '-rf', '--', tmp], check=True)
+    if rc != 0 and os.path.isfile(path):
+        os.remove(path)
+    return name, 'ok' if rc == 0 else 'failed rc %d, see %s.log' % (rc, path), time.time() - t0
+
+
 def run(args, seqs):
     if not os.path.isfile(args.app):
         raise SystemExit('app not found: %s (build it: cmake --build --preset release --target emfusion_app, '
@@ -439,13 +503,26 @@ def run(args, seqs):
         path = reference_path(args.work, s, args.backend + args.tag)
         if path and os.path.isfile(os.path.join(seq_dir(args.work, s), 'bench_params.json')):
             references[path] = (s['base'], reference_frames(s))
-    if references and not os.path.isfile(args.track_camera):
+    # And on each composite with its movers' pixels removed (an info line of the report).
+    # An exported copy has no masks_gt/ to remove them by.
+    removed = [(s, movers_removed_path(args.work, s, args.backend + args.tag)) for s in seqs
+               if s['kind'] == 'composite' and os.path.isfile(os.path.join(seq_dir(args.work, s), 'bench_params.json'))
+               and os.path.isdir(os.path.join(seq_dir(args.work, s), 'masks_gt'))]
+    if (references or removed) and not os.path.isfile(args.track_camera):
         log('[run] track_camera not found (%s; --track-camera): the composites\' camera target is not scored'
             % args.track_camera)
-        references = {}
+        references, removed = {}, []
+    if removed:
+        try:
+            import cv2  # noqa: F401
+        except ImportError:
+            log('[run] no cv2 for %s: track_camera without the movers is not run (the generate step installs '
+                'it)' % sys.executable)
+            removed = []
     with concurrent.futures.ThreadPoolExecutor(max_workers=max(1, args.jobs)) as pool:
         futs = [pool.submit(run_one, args, s) for s in seqs]
         futs += [pool.submit(run_reference, args, base, n, path) for path, (base, n) in references.items()]
+        futs += [pool.submit(run_movers_removed, args, s, path) for s, path in removed]
         for fu in concurrent.futures.as_completed(futs):
             name, status, dt = fu.result()
             log('[run] %s: %s (%.0f s)' % (name, status, dt))
@@ -823,6 +900,24 @@ def reference_ate(args, s, seq):
     return camera_ate(read_tum(path), read_tum(os.path.join(seq, 'groundtruth.txt')))
 
 
+def movers_removed_ate(args, s, seq):
+    """The camera ATE of track_camera on composite s without its movers (run_movers_removed), or
+    None when it did not run."""
+    path = movers_removed_path(args.work, s, args.backend + args.tag)
+    if not path or not os.path.isfile(path):
+        return None
+    return camera_ate(read_tum(path), read_tum(os.path.join(seq, 'groundtruth.txt')))
+
+
+def hidden_background(results):
+    """(name, result) of the composites that fail the camera reference target while their camera is
+    within its margin of track_camera's on their frames without the movers' pixels: what the
+    movers hide of the background, not the system, keeps them from the base frames' ATE."""
+    return [(name, res) for name, res in results.items()
+            if res.get('cam_ref_pass') is False and res.get('cam_movers_removed') is not None
+            and res['camera_ate'] <= res['cam_movers_removed'] + CAM_REFERENCE_MARGIN]
+
+
 def report(args, seqs):
     rows, results, unscored = [], {}, []
     for s in seqs:
@@ -848,6 +943,7 @@ def report(args, seqs):
         res['cam_reference'], res['cam_ref_pass'] = reference_ate(args, s, seq), None
         if res['cam_reference'] is not None and res['camera_ate'] is not None:
             res['cam_ref_pass'] = res['camera_ate'] <= res['cam_reference'] + CAM_REFERENCE_MARGIN
+        res['cam_movers_removed'] = movers_removed_ate(args, s, seq) if s['kind'] == 'composite' else None
         for r in res['objects']:
             r['pass'] = judge_object(r, s['kind'])
         results[s['name']] = res
@@ -934,6 +1030,11 @@ def report(args, seqs):
             and r.get('coverage_from_creation') is not None and r['coverage_from_creation'] >= COVERAGE_MIN]
     print('  info coverage failures met from the creation on (a missed first detection put it off): %s' %
           ('; '.join(late) if late else 'none'))
+    hidden = ['%s (%.2f cm; track_camera %.2f cm on the base frames, %.2f cm without the movers\' pixels)' %
+              (name, 100 * res['camera_ate'], 100 * res['cam_reference'], 100 * res['cam_movers_removed'])
+              for name, res in hidden_background(results)]
+    print('  info camera reference failures that track_camera shares on the frames without the movers\' pixels '
+          '(the background they hide): %s' % ('; '.join(hidden) if hidden else 'none'))
     nf = sum(res.get('false_objects', 0) for res in results.values())
     print('  info false objects (estimates matched to no mover): %d' % nf)
     if unscored:
@@ -1054,6 +1155,52 @@ def compare(paths):
     return 0
 
 
+def selftest_movers_removed(np):
+    """write_movers_removed on a two-frame sequence folder (skipped without cv2): the depth of the
+    movers' pixels removed, every other entry linked; a missing mask named."""
+    try:
+        import cv2
+    except ImportError:
+        print('selftest: no cv2, write_movers_removed not checked')
+        return
+    import tempfile
+    with tempfile.TemporaryDirectory() as tmp:
+        seq = os.path.join(tmp, 'seq')
+        for d in ('depth', 'masks_gt', 'rgb'):
+            os.makedirs(os.path.join(seq, d))
+        with open(os.path.join(seq, 'depth.txt'), 'w') as f:
+            f.write('0.0 depth/000000.png\n0.033 depth/000001.png\n')
+        depth = np.full((6, 8), 7000, np.uint16)
+        labels = np.zeros((6, 8), np.uint8)
+        labels[2:4, 3:6] = 1
+        for fn in ('000000.png', '000001.png'):
+            cv2.imwrite(os.path.join(seq, 'depth', fn), depth)
+            cv2.imwrite(os.path.join(seq, 'masks_gt', fn), labels)
+        out = os.path.join(tmp, 'out')
+        write_movers_removed(seq, out)
+        written = cv2.imread(os.path.join(out, 'depth', '000001.png'), cv2.IMREAD_UNCHANGED)
+        assert written.dtype == np.uint16 and (written == remove_movers(depth, labels)).all()
+        assert os.path.islink(os.path.join(out, 'depth.txt')) and os.path.islink(os.path.join(out, 'rgb'))
+        assert not os.path.islink(os.path.join(out, 'depth'))
+        assert (cv2.imread(os.path.join(seq, 'depth', '000001.png'), cv2.IMREAD_UNCHANGED) == depth).all()
+        os.remove(os.path.join(seq, 'masks_gt', '000001.png'))
+        try:
+            write_movers_removed(seq, os.path.join(tmp, 'out2'))
+            raise AssertionError('write_movers_removed went on without a mask')
+        except SystemExit as e:
+            assert os.path.join('masks_gt', '000001.png') in str(e), str(e)
+        # in a run, that fails the one reference (its copy removed), not the whole run
+        comp = C('x', '0:2', 1, 'cup:mug')
+        work = os.path.join(tmp, 'work')
+        os.makedirs(os.path.dirname(seq_dir(work, comp)))
+        os.rename(seq, seq_dir(work, comp))
+        args = argparse.Namespace(work=work, backend='cpu', tag='', track_camera='/bin/true')
+        path = movers_removed_path(work, comp, 'cpu')
+        name, status, _ = run_movers_removed(args, comp, path)
+        assert status.startswith('failed') and '000001.png' in status, status
+        assert not os.path.exists(path + '.seq') and not os.path.exists(path)
+
+
 def selftest():
     """Checks of the metric code on small constructed cases (77, skipped, without numpy)."""
     try:
@@ -1079,6 +1226,28 @@ def selftest():
     assert reference_path('/w', comp, 'cpu-t') == os.path.join('/w', 'runs', 'cpu-t', 'track_camera',
                                                              'redkitchen_300-300.txt')
     assert reference_path('/w', C('y', '0:300', 2, 'car:toy_car'), 'cpu') == reference_path('/w', comp, 'cpu')
+    # ... and track_camera on each composite without its movers' pixels: one per composite
+    assert movers_removed_path('/w', comp, 'cpu') == os.path.join('/w', 'runs', 'cpu', 'track_camera',
+                                                                   'x-movers-removed.txt')
+    assert movers_removed_path('/w', S('x', 300, 1, 'cup:mug'), 'cpu') is None
+    depth = np.arange(1, 13, dtype=np.uint16).reshape(3, 4) * 1000
+    labels = np.zeros((3, 4), np.uint8)
+    labels[1, 1:3], labels[2, 3] = 1, 2
+    kept = remove_movers(depth, labels)
+    assert (kept[labels > 0] == 0).all() and (kept[labels == 0] == depth[labels == 0]).all()
+    assert depth[1, 1] == 6000 and kept.dtype == np.uint16  # the input is left as it was
+    try:
+        remove_movers(depth, labels[:2])
+        raise AssertionError('remove_movers took labels of another size')
+    except ValueError:
+        pass
+    selftest_movers_removed(np)
+    # the info line: a failed camera reference that track_camera without the movers shares
+    cam = dict(kind='composite', cam_ref_pass=False, camera_ate=0.0258, cam_reference=0.0225)
+    results = {'shared': dict(cam, cam_movers_removed=0.0262), 'margin': dict(cam, cam_movers_removed=0.0250),
+               'worse': dict(cam, cam_movers_removed=0.0245), 'unknown': dict(cam, cam_movers_removed=None),
+               'passes': dict(cam, cam_ref_pass=True, cam_movers_removed=0.0262)}
+    assert [name for name, _ in hidden_background(results)] == ['shared', 'margin']
     # detections: an instance is object k when half its pixels are on k
     det = np.zeros((120, 160), np.uint8)
     det[30:70, 40:60] = 5        # on object 1
