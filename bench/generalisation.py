@@ -16,11 +16,13 @@ Steps (subcommands):
             python3-numpy python3-scipy python3-opencv; installed with apt-get when missing and
             root; the built-in scenes need the app, --app); also writes
             <seq>/bench_labels.json, the per-frame label areas and detections the report needs,
-            so that run and report need numpy only
+            so that report needs numpy only
   export    copy generated sequences without colour and ground-truth masks (--to DIR), for a
             machine that cannot generate (run and report there with --work DIR)
   run       run the app on each generated sequence, and track_camera on each composite's base
-            frames (the reference of the composites' camera target; --track-camera); always re-runs
+            frames (the reference of the composites' camera target; --track-camera) and, with
+            opencv, on each composite without its movers' pixels (a report info line); always
+            re-runs
   report    score the runs and print the table and the summary (numpy only)
   all       generate, run, report
   errors    per estimate, its position and rotation error against its mover, frame by frame
@@ -504,10 +506,15 @@ def run(args, seqs):
         if path and os.path.isfile(os.path.join(seq_dir(args.work, s), 'bench_params.json')):
             references[path] = (s['base'], reference_frames(s))
     # And on each composite with its movers' pixels removed (an info line of the report).
-    # An exported copy has no masks_gt/ to remove them by.
-    removed = [(s, movers_removed_path(args.work, s, args.backend + args.tag)) for s in seqs
-               if s['kind'] == 'composite' and os.path.isfile(os.path.join(seq_dir(args.work, s), 'bench_params.json'))
-               and os.path.isdir(os.path.join(seq_dir(args.work, s), 'masks_gt'))]
+    removed = []
+    for s in seqs:
+        seq = seq_dir(args.work, s)
+        if s['kind'] != 'composite' or not os.path.isfile(os.path.join(seq, 'bench_params.json')):
+            continue
+        if os.path.isdir(os.path.join(seq, 'masks_gt')):
+            removed.append((s, movers_removed_path(args.work, s, args.backend + args.tag)))
+        else:
+            log('[run] %s: no masks_gt/ (an exported copy): track_camera without its movers is not run' % s['name'])
     if (references or removed) and not os.path.isfile(args.track_camera):
         log('[run] track_camera not found (%s; --track-camera): the composites\' camera target is not scored'
             % args.track_camera)
