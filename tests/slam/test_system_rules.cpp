@@ -585,6 +585,23 @@ TEST_CASE("The best fit to a detection that the frame shows is taken", "[slam]")
   CHECK_FALSE(best_shown_fit(std::vector<Fit>{}, 0.5, always));
 }
 
+TEST_CASE("An object is partly hidden from the share of its drawn model behind nearer surfaces", "[slam]") {
+  using Cover = emfusion::detail::lifecycle::DrawnCover;
+  SystemParams<float> params;
+  params.predict_hidden_share = 0.25f;
+  const int min_pixels = params.keep_mask_pixels_for(640, 480);
+  REQUIRE(min_pixels > 8);
+  const std::vector<Cover> covers{
+      {min_pixels, 0, min_pixels / 4},      // a quarter behind: partly hidden
+      {min_pixels, 0, min_pixels / 4 - 1},  // just under a quarter
+      {min_pixels - 1, 0, min_pixels - 1},  // all behind, but too little drawn to tell
+      {4 * min_pixels, 3 * min_pixels, 0},  // wholly in view
+  };
+  CHECK(partly_hidden(covers, params, 640, 480) == std::vector<bool>{true, false, false, false});
+  params.predict_hidden_share = 0;
+  CHECK(partly_hidden(covers, params, 640, 480) == std::vector<bool>(4, false));
+}
+
 TEST_CASE("The turns tried for a lost object are the cube's 23 other than none", "[slam]") {
   const std::vector<Mat3<double>> turns = detail::reidentification::cube_turns<double>();
   REQUIRE(turns.size() == 23);
@@ -1318,6 +1335,47 @@ TEMPLATE_LIST_TEST_CASE("An object that passes behind another moves on at its ve
     INFO("shown enough: " << tracked.moved_on << " moved on, error " << tracked.error << " m");
     CHECK(tracked.moved_on == 0);
     CHECK(tracked.error < bounded.error);
+  }
+  SECTION("partly hidden, it is associated and solved from its prediction (predict_hidden_share)") {
+    // The box moves on behind the low panel, its top third in view: tracked
+    // on that (it shows enough), but from where its velocity takes it.
+    REQUIRE_FALSE(params.predict_motion);
+    struct Partly {
+      int predicted = 0;   // frames whose solve started at the prediction
+      double error = 1e9;  // distance from the box at the last frame, metres
+    };
+    const auto behind_low_panel = [&](S share) {
+      SystemParams<S> p = params;
+      p.predict_hidden_share = share;
+      System<S, B> sys(camera, p);
+      Image<int, Host> labels;
+      const Image<S, B> first = depth_with_box(box_at(0), &labels, true);
+      const Detections det = detections_of(labels, 1, "cup", 0.0);
+      sys.process(first, 0.0, &det);
+      REQUIRE(sys.objects().size() == 1);
+      const Vec3<S> start = sys.objects()[0]->pose().translation();
+      Partly out;
+      const int last = 45;
+      for (int k = 1; k <= last; ++k) {
+        Image<int, Host> seen;
+        const Image<S, B> depth = depth_with_box(box_at(k), k == 1 ? &seen : nullptr, true);
+        const Detections again = k == 1 ? detections_of(seen, 1, "cup", k / 30.0) : Detections{};
+        const FrameResult r = sys.process(depth, k / 30.0, k == 1 ? &again : nullptr);
+        REQUIRE(sys.objects().size() == 1);
+        out.predicted += r.object_status[0].tracking == TrackingOutcome::tracked && r.object_status[0].from_prediction;
+      }
+      out.error = double(norm(sys.objects()[0]->pose().translation() - start - (box_at(last) - box_at(0))));
+      return out;
+    };
+    const Partly with = behind_low_panel(params.predict_hidden_share), without = behind_low_panel(S(0));
+    INFO("share " << params.predict_hidden_share << ": " << with.predicted << " frames from the prediction, error "
+                  << with.error << " m; share 0: " << without.predicted << ", " << without.error << " m");
+    REQUIRE(params.predict_hidden_share > S(0));
+    CHECK(with.predicted >= 10);
+    CHECK(without.predicted == 0);
+    // Its top third's edges tell where it is either way: the prediction
+    // must not cost accuracy there.
+    CHECK(with.error <= without.error + 0.002);
   }
   SECTION("without the hold and the carried pose, found where it went in what no model explains") {
     params.hold_occluded_objects = false;

@@ -164,6 +164,7 @@ const std::vector<ParameterEntry<S>>& parameter_table() {
       EMF_BOOL("hold_unseen_objects", hold_unseen_objects, "objects in that grace keep their pose while cut by the image border"),
       EMF_BOOL("hold_occluded_objects", hold_occluded_objects, "objects hidden behind others move on at their velocity instead of being tracked"),
       EMF_NUMBER("hidden_moving_seconds", hidden_moving_seconds, "an object hidden behind others moves on at its velocity this long after it was last tracked, then stays (s)"),
+      EMF_NUMBER("predict_hidden_share", predict_hidden_share, "an object with this share of its drawn model behind nearer surfaces is associated and solved from its constant-velocity prediction (0: off)"),
       EMF_NUMBER("leaving_share", leaving_share, "an object standing still of whose extent less than this share lies inside the image keeps its pose instead of being tracked (0: off)"),
       EMF_NUMBER("leaving_still_translation", leaving_still.translation, "standing still, for leaving_share: moved at most this over the last 0.2 s (m)"),
       EMF_NUMBER("leaving_still_rotation_degrees", leaving_still.rotation_degrees, "standing still, for leaving_share: turned at most this over the last 0.2 s (degrees)"),

@@ -204,6 +204,55 @@ std::vector<ObjectPixels> all_object_pixels(const Frame<S, B>& frame, int count,
   return out;
 }
 
+/// How this frame meets every live object's model as drawn at its last
+/// pose (its rendering of the last frame), in one pass over the frame: per
+/// object the pixels drawn inside the visibility border, those where the
+/// frame's surface lies within likelihood.sigma of the model's, and those
+/// where it is nearer by more than twice that (detail::lifecycle::
+/// DrawnCover). Zero for young objects and for objects without a rendering
+/// of the frame's size. It needs only the frame's points, so it can run
+/// before the E-step: partly_hidden and hold_decisions's hidden rule read it.
+template <class S, Backend B>
+std::vector<detail::lifecycle::DrawnCover> drawn_covers(const Map<S, B>& map, const Frame<S, B>& frame,
+                                                        const SystemParams<S>& params,
+                                                        DrawnCoverWorkspace<S, B>* workspace = nullptr) {
+  const std::size_t n = map.objects.size();
+  std::vector<detail::lifecycle::DrawnModel<S>> models(n);
+  for (std::size_t k = 0; k < n; ++k) {
+    const ObjectModel<S, B>& o = *map.objects[k];
+    const RaycastResult<S, B>& r = o.rendering();
+    if (!map.is_young(o.id()) && r.hit.same_size(frame.points.width(), frame.points.height()))
+      models[k] = {std::as_const(r.hit).view(), std::as_const(r.depth).view()};
+  }
+  const int border = params.visibility_border_for(frame.points.width());
+  DrawnCoverWorkspace<S, B> local;
+  std::vector<detail::lifecycle::DrawnCover> covers;
+  for (const detail::lifecycle::CoverSums& c :
+       reduce_per_group(frame.points.backend(), models, frame.points.size(),
+                        detail::lifecycle::AddCoverPixel<S>{frame.points.view(), border, params.likelihood.sigma},
+                        detail::lifecycle::CoverSums{}, workspace ? *workspace : local))
+    covers.push_back(c.counts());
+  return covers;
+}
+
+/// Per live object, whether it is partly hidden (SystemParams::
+/// predict_hidden_share): its model, drawn at its last pose over at least
+/// keep_mask_pixels inside the border, lies behind a nearer surface of the
+/// frame on at least that share of them (`covers`: drawn_covers of a frame
+/// of width x height). All false when the share is 0.
+template <class S>
+std::vector<bool> partly_hidden(const std::vector<detail::lifecycle::DrawnCover>& covers, const SystemParams<S>& params,
+                                int width, int height) {
+  std::vector<bool> out(covers.size(), false);
+  if (!(params.predict_hidden_share > S(0))) return out;
+  const int min_pixels = params.keep_mask_pixels_for(width, height);
+  for (std::size_t k = 0; k < covers.size(); ++k) {
+    const detail::lifecycle::DrawnCover& c = covers[k];
+    out[k] = c.drawn >= min_pixels && double(c.front) >= double(params.predict_hidden_share) * double(c.drawn);
+  }
+  return out;
+}
+
 /// A held object's pose in this frame and its outcome (hold_decisions).
 template <class S>
 struct HeldPose {
@@ -249,14 +298,15 @@ struct HeldPose {
 ///   while hidden"). Its record keeps since when (ObjectRecord::hidden_since).
 /// The segmentation is the last frame's, whose labels may no longer be the
 /// objects' order, so it is not used. With the hidden rule one pass over
-/// the frame for every object's cover; one more for the E-step counts on
+/// the frame for every object's cover (none where `drawn_covers_given`
+/// holds this frame's drawn_covers); one more for the E-step counts on
 /// frames with young objects or an object the cover finds behind others.
 template <class S, Backend B>
-std::vector<std::optional<HeldPose<S>>> hold_decisions(Map<S, B>& map, const Frame<S, B>& frame,
-                                                       const PinholeCamera<S>& camera, const SystemParams<S>& params,
-                                                       const std::vector<SE3<S>>& before, double timestamp,
-                                                       ObjectPixelsWorkspace<S, B>* workspace = nullptr,
-                                                       DrawnCoverWorkspace<S, B>* cover_workspace = nullptr) {
+std::vector<std::optional<HeldPose<S>>> hold_decisions(
+    Map<S, B>& map, const Frame<S, B>& frame, const PinholeCamera<S>& camera, const SystemParams<S>& params,
+    const std::vector<SE3<S>>& before, double timestamp, ObjectPixelsWorkspace<S, B>* workspace = nullptr,
+    DrawnCoverWorkspace<S, B>* cover_workspace = nullptr,
+    const std::vector<detail::lifecycle::DrawnCover>* drawn_covers_given = nullptr) {
   const int n = int(map.objects.size());
   detail::require(int(before.size()) == n, "hold_decisions", "need one pose per live object");
   std::vector<std::optional<HeldPose<S>>> held(static_cast<std::size_t>(n));
@@ -275,21 +325,10 @@ std::vector<std::optional<HeldPose<S>>> hold_decisions(Map<S, B>& map, const Fra
   // displaced, not hidden, and tracking it brings it back). Every object's
   // cover in one pass; the E-step counts in another only where a rule
   // needs them.
-  std::vector<detail::lifecycle::DrawnModel<S>> models(static_cast<std::size_t>(n));
-  for (int k = 0; k < n && params.hold_occluded_objects; ++k) {
-    const ObjectModel<S, B>& o = *map.objects[std::size_t(k)];
-    const RaycastResult<S, B>& r = o.rendering();
-    if (!map.is_young(o.id()) && r.hit.same_size(frame.points.width(), frame.points.height()))
-      models[std::size_t(k)] = {std::as_const(r.hit).view(), std::as_const(r.depth).view()};
-  }
-  DrawnCoverWorkspace<S, B> local_cover;
   std::vector<detail::lifecycle::DrawnCover> covers;
   if (params.hold_occluded_objects)
-    for (const detail::lifecycle::CoverSums& c :
-         reduce_per_group(frame.points.backend(), models, frame.points.size(),
-                          detail::lifecycle::AddCoverPixel<S>{frame.points.view(), border, params.likelihood.sigma},
-                          detail::lifecycle::CoverSums{}, cover_workspace ? *cover_workspace : local_cover))
-      covers.push_back(c.counts());
+    covers = drawn_covers_given ? *drawn_covers_given : drawn_covers(map, frame, params, cover_workspace);
+  detail::require(covers.empty() || int(covers.size()) == n, "hold_decisions", "need one drawn cover per live object");
   const auto covered = [&](int k) {
     const detail::lifecycle::DrawnCover& c = covers[std::size_t(k)];
     return c.drawn >= min_pixels && c.front > c.agree;

@@ -258,14 +258,23 @@ class System {
     clock_.lap(result.times.track_background);
     if (camera.outcome != TrackingOutcome::tracked) return;  // the associations stay those at the previous poses
     if (!map_.objects.empty()) {
-      const std::vector<PoseStarts<S>> object_starts = predict_objects(map_, timestamp, params_);
+      // Objects partly behind nearer surfaces are associated and solved
+      // from their prediction; the same covers feed the hidden rule.
+      const bool covers_needed = params_.hold_occluded_objects || params_.predict_hidden_share > S(0);
+      const std::vector<detail::lifecycle::DrawnCover> covers =
+          covers_needed ? drawn_covers(map_, frame_, params_, &drawn_cover_workspace_)
+                        : std::vector<detail::lifecycle::DrawnCover>{};
+      const std::vector<bool> hidden_in_part =
+          covers_needed ? partly_hidden(covers, params_, frame_.points.width(), frame_.points.height())
+                        : std::vector<bool>(map_.objects.size(), false);
+      const std::vector<PoseStarts<S>> object_starts = predict_objects(map_, timestamp, params_, &hidden_in_part);
       associate(map_, frame_, parts_.likelihood, params_);
       clock_.lap(result.times.e_step);
       // Objects the frame does not show well enough are held, not solved.
       std::vector<SE3<S>> before;
       for (const PoseStarts<S>& s : object_starts) before.push_back(s.previous);
       const auto held = hold_decisions(map_, frame_, camera_, params_, before, timestamp, &object_pixels_workspace_,
-                                       &drawn_cover_workspace_);
+                                       &drawn_cover_workspace_, covers_needed ? &covers : nullptr);
       std::vector<bool> skip;
       for (const auto& h : held) skip.push_back(h.has_value());
       frame_.object_tracks = track_objects(map_, frame_, params_, parts_.object_norm, parts_.solver,

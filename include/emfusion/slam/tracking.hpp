@@ -243,16 +243,21 @@ PoseStarts<S> predict_camera(Map<S, B>& map, double timestamp, const SystemParam
 }
 
 /// Moves every live object that was tracked in the last two frames to its
-/// constant-velocity prediction at `timestamp` (when predict_motion is on),
+/// constant-velocity prediction at `timestamp` (when predict_motion is on,
+/// else only the objects `partly_hidden` flags, one flag per live object),
 /// for the E-step; returns the starts for track_objects, in Map::objects
 /// order.
 template <class S, Backend B>
-std::vector<PoseStarts<S>> predict_objects(Map<S, B>& map, double timestamp, const SystemParams<S>& params) {
+std::vector<PoseStarts<S>> predict_objects(Map<S, B>& map, double timestamp, const SystemParams<S>& params,
+                                           const std::vector<bool>* partly_hidden = nullptr) {
+  detail::require(!partly_hidden || partly_hidden->size() == map.objects.size(), "predict_objects",
+                  "need one partly_hidden flag per live object");
   std::vector<PoseStarts<S>> starts;
   const Trajectory& camera = map.camera_trajectory;
   for (auto& o : map.objects) {
+    const bool predicted = params.predict_motion || (partly_hidden && (*partly_hidden)[starts.size()]);
     starts.push_back({o->pose(), std::nullopt});
-    if (!params.predict_motion || camera.size() < 2) continue;
+    if (!predicted || camera.size() < 2) continue;
     const std::optional<SE3<double>> p = predict_pose(map.record_of(o->id()).trajectory,
                                                       camera[camera.size() - 2].timestamp, camera.back().timestamp,
                                                       timestamp);
