@@ -1232,6 +1232,16 @@ TEMPLATE_LIST_TEST_CASE("An object that passes behind another moves on at its ve
     return d.template to<B>();
   };
   const auto depth_at = [&](int frame, Image<int, Host>* labels) { return depth_with_box(box_at(frame), labels); };
+  // The box's object, made from a detection on the first frame behind the
+  // low panel; returns where it starts.
+  const auto first_behind_low_panel = [&](System<S, B>& sys) {
+    Image<int, Host> labels;
+    const Image<S, B> first = depth_with_box(box_at(0), &labels, true);
+    const Detections det = detections_of(labels, 1, "cup", 0.0);
+    sys.process(first, 0.0, &det);
+    REQUIRE(sys.objects().size() == 1);
+    return sys.objects()[0]->pose().translation();
+  };
   struct Outcome {
     int frames_lost = 0, created = 0;
     bool back = false;    // object 1 is live at the end
@@ -1300,12 +1310,7 @@ TEMPLATE_LIST_TEST_CASE("An object that passes behind another moves on at its ve
       SystemParams<S> p = with;
       p.hidden_moving_seconds = seconds;
       System<S, B> sys(camera, p);
-      Image<int, Host> labels;
-      const Image<S, B> first = depth_with_box(box_at(0), &labels, true);
-      const Detections det = detections_of(labels, 1, "cup", 0.0);
-      sys.process(first, 0.0, &det);
-      REQUIRE(sys.objects().size() == 1);
-      const Vec3<S> start = sys.objects()[0]->pose().translation();
+      const Vec3<S> start = first_behind_low_panel(sys);
       Hidden out;
       Vec3<S> last = start;
       for (int k = 1; k <= 70; ++k) {
@@ -1348,12 +1353,7 @@ TEMPLATE_LIST_TEST_CASE("An object that passes behind another moves on at its ve
       SystemParams<S> p = params;
       p.predict_hidden_share = share;
       System<S, B> sys(camera, p);
-      Image<int, Host> labels;
-      const Image<S, B> first = depth_with_box(box_at(0), &labels, true);
-      const Detections det = detections_of(labels, 1, "cup", 0.0);
-      sys.process(first, 0.0, &det);
-      REQUIRE(sys.objects().size() == 1);
-      const Vec3<S> start = sys.objects()[0]->pose().translation();
+      const Vec3<S> start = first_behind_low_panel(sys);
       Partly out;
       const int last = 45;
       for (int k = 1; k <= last; ++k) {
