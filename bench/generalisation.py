@@ -730,8 +730,11 @@ def longest_run(flags):
     return best
 
 
-def object_metrics(name, k, labels, frame_t, fps, det_every, est_frames, kind):
-    """The per-object numbers that need no poses. est_frames: {estimate id: set of frames}."""
+def object_metrics(name, k, labels, frame_t, fps, det_every, est_frames, kind, creation=None):
+    """The per-object numbers that need no poses. est_frames: {estimate id: set of frames};
+    creation: {estimate id: frame the system created it} where run.json says (an estimate's
+    trajectory can begin before its creation: the app tracks new objects back through the
+    frames it kept, track_back_frames), else its first frame."""
     n = len(frame_t)
     vis = visible_frames(labels, k)
     visset = set(vis)
@@ -741,7 +744,8 @@ def object_metrics(name, k, labels, frame_t, fps, det_every, est_frames, kind):
             alive[f] += 1
     r = dict(name=name, visible=len(vis), visible_any=sum(1 for fr in labels['frames'] if fr['area'][k - 1] > 0),
              fragments=len(est_frames), duplicate_frames=sum(1 for a in alive if a >= 2))
-    created = min((min(fs) for fs in est_frames.values() if fs), default=None)
+    creation = creation or {}
+    created = min((creation.get(i, min(fs)) for i, fs in est_frames.items() if fs), default=None)
     r['first_visible'] = vis[0] if vis else None
     r['created'] = created
     r['coverage'] = (sum(1 for f in vis if alive[f] > 0) / len(vis)) if vis else None
@@ -768,17 +772,31 @@ def object_metrics(name, k, labels, frame_t, fps, det_every, est_frames, kind):
     return r
 
 
+def run_objects(path):
+    """run.json's "objects" entries (io/run_json.hpp); none when there is no run.json."""
+    if not os.path.isfile(path):
+        return []
+    try:
+        return json.load(open(path)).get('objects', [])
+    except ValueError as e:
+        raise SystemExit('%s: not valid JSON: %s' % (path, e))
+
+
 def merged_ids(path):
     """The ids run.json says were merged into another object (event "merged"); none
     when there is no run.json (io/run_json.hpp, read_merged_object_ids)."""
-    if not os.path.isfile(path):
-        return set()
-    try:
-        run = json.load(open(path))
-    except ValueError as e:
-        raise SystemExit('%s: not valid JSON: %s' % (path, e))
-    return {int(o['id']) for o in run.get('objects', [])
+    return {int(o['id']) for o in run_objects(path)
             if any(e.get('event') == 'merged' for e in o.get('events', []))}
+
+
+def creation_times(path):
+    """{id: timestamp of its "created" event} from run.json; none when there is no run.json."""
+    out = {}
+    for o in run_objects(path):
+        for e in o.get('events', []):
+            if e.get('event') == 'created' and e.get('timestamp') is not None:
+                out[int(o['id'])] = float(e['timestamp'])
+    return out
 
 
 def frame_errors(est_cam, gt_cam, est_obj, gt_obj):
@@ -816,6 +834,7 @@ def load_run(seq, out):
     truth = {o['name']: read_tum(os.path.join(seq, 'groundtruth_objects', o['name'] + '.txt')) for o in info['objects']}
     estimates, classes = {}, {}
     merged = merged_ids(os.path.join(out, 'run.json'))
+    created_t = creation_times(os.path.join(out, 'run.json'))
     for r in read_list(os.path.join(out, 'objects.txt')):
         i = int(r[0])
         if i in merged:  # its poses are in the trajectory of the object it was merged into
@@ -823,12 +842,17 @@ def load_run(seq, out):
         classes[i] = r[1]
         p = os.path.join(out, 'objects', '%d.txt' % i)
         estimates[i] = read_tum(p) if os.path.isfile(p) else (np.zeros(0), np.zeros((0, 4, 4)))
-    return labels, frame_t, fps, gt_cam, est_cam, truth, estimates, classes
+    creation = {}
+    for i, t in created_t.items():
+        k = nearest(frame_t, t)
+        if abs(frame_t[k] - t) <= MAX_DIFF:
+            creation[i] = k
+    return labels, frame_t, fps, gt_cam, est_cam, truth, estimates, classes, creation
 
 
 def evaluate_run(seq, out, kind):
     """All numbers of one run: camera ATE, per truth object, false objects."""
-    labels, frame_t, fps, gt_cam, est_cam, truth, estimates, classes = load_run(seq, out)
+    labels, frame_t, fps, gt_cam, est_cam, truth, estimates, classes, creation = load_run(seq, out)
     by, unmatched = match_objects(est_cam, gt_cam, estimates, truth)
     res = dict(camera_ate=camera_ate(est_cam, gt_cam), frames=len(frame_t), objects=[],
                false_objects=len(unmatched), false_object_frames=sum(len(estimates[i][0]) for i in unmatched),
@@ -837,7 +861,7 @@ def evaluate_run(seq, out, kind):
     for k, n in enumerate(names, 1):
         ids = by.get(n, [])
         est_frames = {i: frames_of(estimates[i], frame_t) for i in ids}
-        r = object_metrics(n, k, labels, frame_t, fps, labels['det_every'], est_frames, kind)
+        r = object_metrics(n, k, labels, frame_t, fps, labels['det_every'], est_frames, kind, creation)
         r['estimates'] = ids
         r['ate'] = None
         if ids:
@@ -1079,7 +1103,7 @@ def errors(args, seqs):
                 not os.path.isfile(os.path.join(out, 'camera.txt')):
             log('[errors] %s: not generated or no run for backend %s%s' % (s['name'], args.backend, args.tag))
             continue
-        labels, frame_t, fps, gt_cam, est_cam, truth, estimates, classes = load_run(seq, out)
+        labels, frame_t, fps, gt_cam, est_cam, truth, estimates, classes, _ = load_run(seq, out)
         by, _ = match_objects(est_cam, gt_cam, estimates, truth)
         for n in labels['objects']:
             for i in by.get(n, []):
@@ -1280,6 +1304,10 @@ def selftest():
     assert m['fragments'] == 1 and m['duplicate_frames'] == 0 and m['lost_frames'] == 0
     assert abs(m['coverage'] - 4 / 8) < 1e-12 and m['visible'] == 8 and m['visible_any'] == 10
     assert m['coverage_from_creation'] == 1.0  # visible 6, 7, 10, 11 from its creation at 6: all covered
+    # the same object created at 6 but tracked back to 3 (run.json's creation): the delay counts
+    # from the creation, the coverage every frame with a pose
+    m = object_metrics('a', 1, labels, ft, 30.0, 3, {4: set(range(3, 12))}, 'synthetic', {4: 6})
+    assert m['created'] == 6 and m['creation_delay'] == 4 and abs(m['coverage'] - 7 / 8) < 1e-12
     j = judge_object(dict(m, ate=0.004), 'synthetic')
     assert j == dict(lost=True, dup=True, create=True, obj_ate=True, coverage=False), j
     # two fragments, overlapping at frames 5-6 (duplicates), a gap 7,10 of which 7 and 10-11 are
@@ -1370,8 +1398,10 @@ def selftest():
         assert merged_ids(p) == set()
         with open(p, 'w') as f:
             json.dump({'objects': [{'id': 1, 'events': [{'event': 'absorbed', 'from': 4}]},
-                                   {'id': 4, 'events': [{'event': 'created'}, {'event': 'merged', 'into': 1}]}]}, f)
+                                   {'id': 4, 'events': [{'event': 'created', 'timestamp': 0.5},
+                                                        {'event': 'merged', 'into': 1}]}]}, f)
         assert merged_ids(p) == {4}
+        assert creation_times(p) == {4: 0.5}  # object 1's creation is not in this file
     # compare: targets counted per object; objects keyed by name, run times left out
     ra = {'s1': {'camera_ate': 0.001, 'seconds': 5.0, 'objects': [
         {'name': 'cup_1', 'ate': 0.002, 'pass': {'lost': True, 'obj_ate': True, 'coverage': None}}]}}

@@ -711,6 +711,11 @@ TEST_CASE("Hostile frames: the guards' parameters are validated", "[slam]") {
   CHECK(error([](SystemParams<float>& p) { p.refind_unexplained_every = 0; }).empty());  // off
   CHECK(error([](SystemParams<float>& p) { p.refind_unexplained_every = -1; }).find("refind_unexplained_every") !=
         std::string::npos);
+  // The frames kept to track new objects back through (each a depth image).
+  CHECK(error([](SystemParams<float>& p) { p.track_back_frames = 0; }).empty());  // off
+  CHECK(error([](SystemParams<float>& p) { p.track_back_frames = -1; }).find("track_back_frames") != std::string::npos);
+  CHECK(error([](SystemParams<float>& p) { p.track_back_frames = 100000; }).find("track_back_frames") !=
+        std::string::npos);
   const double bad_sigmas[] = {0.0, -2.0, double(NAN), double(INFINITY)};
   for (const double bad : bad_sigmas)
     CHECK(error([bad](SystemParams<float>& p) { p.refind_unexplained_sigmas = bad; }).find("refind_unexplained_sigmas") !=

@@ -40,6 +40,7 @@ TEST_CASE("Object histories: created, tracked, retried, lost, found again, given
 
   FrameResult r = frame(0);
   r.created = {1, 2};
+  r.tracked_back = {{1, 4}};  // its trajectory holds 4 frames before this one
   h.add(r, map);
   r = frame(1);
   r.object_status = {status(1, TrackingOutcome::tracked, 2, true), status(2, TrackingOutcome::jump_rejected, 2, false)};
@@ -59,6 +60,7 @@ TEST_CASE("Object histories: created, tracked, retried, lost, found again, given
   h.add(r, map);
   r = frame(3);
   r.found_again(1, FoundBy::in_view);
+  r.tracked_back = {{1, 6}};  // ... and tracked back 6 frames (4 when it was created: 10 in all)
   CHECK(r.reidentified == std::vector<int>{1});
   CHECK(r.found_by == std::vector<FoundBy>{FoundBy::in_view});
   map.lost.clear();
@@ -78,6 +80,8 @@ TEST_CASE("Object histories: created, tracked, retried, lost, found again, given
   CHECK(a.retried == 1);
   CHECK(a.from_prediction == 1);
   CHECK(a.confirmed == 0);
+  CHECK(a.tracked_back == 10);
+  CHECK(b.tracked_back == 0);
   CHECK(b.refused == 1);
   CHECK(b.moved_on == 1);
   CHECK(b.tracked == 1);

@@ -174,6 +174,7 @@ const std::vector<ParameterEntry<S>>& parameter_table() {
       EMF_NUMBER("refind_unexplained_sigmas", refind_unexplained_sigmas, "unexplained: off the background's surface by more than this many likelihood sigmas"),
       EMF_NUMBER("refind_unexplained_speed", refind_unexplained_speed, "... only as far from where an object was last tracked as this speed takes it (m/s)"),
       EMF_BOOL("hold_unexplained", hold_unexplained, "while a lost object is looked for, the background does not fuse what no model explains (frames without detections)"),
+      EMF_INTEGER("track_back_frames", track_back_frames, "frames kept to track new and found objects back through (0: off)"),
       EMF_NUMBER("min_foreground", min_foreground, "render object voxels above this p_fg"),
       EMF_NUMBER("occlusion_margin", occlusion_margin, "object loses to background this far behind (m)"),
       EMF_BOOL("use_association", use_association, "ablation switch: association likelihoods"),

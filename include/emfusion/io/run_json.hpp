@@ -16,7 +16,7 @@ namespace emfusion {
 
 /// One entry of run.json's "objects": {"id", "class", "tracked_frames",
 /// "refused_frames", "moved_on_frames", "retried_frames", "from_prediction_frames",
-/// "confirmed_frames", "events"},
+/// "confirmed_frames", "tracked_back_frames", "events"},
 /// each event {"event", "frame", "timestamp"} plus "rule" (the deletion
 /// rule) for `lost` and `deleted`, "by" ("detection", "in_view" or
 /// "unexplained": how it was found) for `found_again`, "into" (the id it goes on as) for
@@ -32,6 +32,7 @@ inline Json object_history_json(const ObjectHistory& history, const std::string&
   object["retried_frames"] = history.retried;
   object["from_prediction_frames"] = history.from_prediction;
   object["confirmed_frames"] = history.confirmed;
+  object["tracked_back_frames"] = history.tracked_back;
   Json& events = object["events"] = Json::array();
   for (const ObjectEvent& e : history.events) {
     Json event;

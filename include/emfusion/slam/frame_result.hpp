@@ -136,6 +136,13 @@ struct ObjectMerge {
   int into = 0;
 };
 
+/// An object created or found again, tracked back through `frames` kept
+/// frames before this one (slam/track_back.hpp).
+struct TrackedBack {
+  int id = 0;
+  int frames = 0;
+};
+
 /// What happened in one frame.
 struct FrameResult {
   int frame = 0;
@@ -168,6 +175,9 @@ struct FrameResult {
   /// Objects found to be one (merge_min_inliers; docs/system.md, "Merging
   /// duplicates"): each `from` left the map (live or lost) and goes on as `into`.
   std::vector<ObjectMerge> merged;
+  /// Objects created or found again this frame whose trajectories now also
+  /// hold poses of frames before it (track_back_frames).
+  std::vector<TrackedBack> tracked_back;
   std::vector<ObjectStatus> object_status;  ///< objects that existed before this frame, in Map::objects order
   int live_objects = 0;
   StageTimes times;

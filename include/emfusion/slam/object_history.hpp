@@ -57,6 +57,9 @@ struct ObjectHistory {
   /// Frames its solve, refused by the motion bound, was taken as the last
   /// of refused solves that agree (SystemParams::confirm_jump_frames).
   int confirmed = 0;
+  /// Frames before its creation or return it was tracked back through
+  /// (track_back_frames), all told.
+  int tracked_back = 0;
 };
 
 /// Collects ObjectHistory from each frame: call add() after every
@@ -84,6 +87,7 @@ class ObjectHistories {
       if (k < r.found_by.size()) history(r.reidentified[k]).events.back().by = r.found_by[k];
     }
     for (int id : r.relocalized) event(id, ObjectEventKind::relocalized);
+    for (const TrackedBack& t : r.tracked_back) history(t.id).tracked_back += t.frames;
     std::vector<int> lost_now;
     for (const auto& l : map.lost) lost_now.push_back(l.object->id());
     for (int id : r.deleted) {

@@ -275,6 +275,12 @@ struct SystemParams {
   /// unexplained.hpp): otherwise it takes in an object that comes back and
   /// stands still before refind_unexplained sees enough of it.
   bool hold_unexplained = true;
+  /// Objects tracked back (an extension of the paper; track_back.hpp): the
+  /// system keeps this many of the last frames, and an object created or
+  /// found again by a detection is aligned to those since its last pose,
+  /// newest first, its trajectory starting or going on there. 0: off (no
+  /// frames kept).
+  int track_back_frames = 30;
 
   // Rendering (sec. 3.5).
   S min_foreground = S(0.5);     ///< object voxels render where p_fg exceeds this
@@ -363,6 +369,7 @@ struct SystemParams {
                     "reidentify_min_inliers must be in (0, 1]");
     detail::require(relocalize_below >= 0 && relocalize_below <= 1, w, "relocalize_below must be in [0, 1]");
     detail::require(refind_unexplained_every >= 0, w, "refind_unexplained_every must not be negative");
+    detail::require(track_back_frames >= 0 && track_back_frames <= 1000, w, "track_back_frames must be in [0, 1000]");
     detail::require(refind_unexplained_sigmas > 0 && std::isfinite(refind_unexplained_sigmas), w,
                     "refind_unexplained_sigmas must be positive and finite");
     detail::require(refind_unexplained_speed > 0 && std::isfinite(refind_unexplained_speed), w,

@@ -19,6 +19,8 @@
 //   9. lost objects found again without a detection: where the frame shows
 //      them where they were lost (reidentification.hpp), or in what no
 //      model explains, between detector frames             (unexplained.hpp)
+//  10. objects created or found by a detection tracked back through the last
+//      frames, which the system keeps                      (track_back.hpp)
 //
 // The state is a Map (map.hpp) and the frame's images a Frame (frame.hpp);
 // a user's own loop calls the same stages on its own Map and Frame
@@ -51,6 +53,7 @@
 #include "emfusion/slam/params.hpp"
 #include "emfusion/slam/preprocessing.hpp"
 #include "emfusion/slam/rendering.hpp"
+#include "emfusion/slam/track_back.hpp"
 #include "emfusion/slam/tracking.hpp"
 #include "emfusion/slam/unexplained.hpp"
 #include "emfusion/solve/solvers.hpp"
@@ -190,6 +193,12 @@ class System {
     // (refind_unexplained_every; 0 turns it off).
     refind_unexplained(map_, frame_, camera_, params_, parts_.object_norm, parts_.solver, result,
                        &unexplained_);
+    // Objects created or found by a detection this frame, tracked back through
+    // the frames kept (track_back_frames; 0 turns it off); then this frame
+    // is kept.
+    track_back_new_objects(map_, history_, timestamp, camera_, params_, parts_.likelihood, parts_.object_norm,
+                           parts_.solver, result);
+    history_.keep(frame_.filtered, map_.T_world_camera, timestamp, params_.track_back_frames);
     // Deleted and resized (detector frames) object volumes are freed memory
     // the C library may keep; on the CPU that is resident memory.
     if constexpr (!B::is_device)
@@ -212,6 +221,7 @@ class System {
     }
     map_ = std::move(map);
     unexplained_ = {};  // its groups are of the frames before
+    history_ = {};      // ... and so are its frames
   }
 
   const PinholeCamera<S>& camera() const { return camera_; }
@@ -311,6 +321,7 @@ class System {
   UnexplainedWorkspace<S, B> unexplained_;  // hold_unexplained's and refind_unexplained's
   Image<S, B> held_background_weights_;     // hold_unexplained's
   SparseIntegrationWorkspace<S, B> sparse_workspace_;
+  FrameHistory<S, B> history_;  // the frames objects are tracked back through
   /// The stage times of the frame being processed: on CUDA events queued at
   /// each stage's end and read once at its finish, so the device is not
   /// drained between stages to time them.
