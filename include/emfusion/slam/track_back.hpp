@@ -40,7 +40,8 @@ namespace emfusion {
 
 /// The last frames the map took in, oldest first: each one's filtered depth
 /// (Frame::filtered), the camera's pose and the time. The system keeps
-/// params.track_back_frames of them (4 bytes a pixel each).
+/// params.track_back_frames of them (a depth image each: 4 bytes a pixel
+/// in float, 8 in double).
 template <class S, Backend B>
 struct FrameHistory {
   struct Kept {
