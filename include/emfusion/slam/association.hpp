@@ -107,6 +107,33 @@ void foreground_weights(const Map<S, B>& map, Frame<S, B>& frame) {
   }
 }
 
+/// The E-step for frame.points against `background` with the camera at
+/// T_world_camera and the object models `models` (`likelihood` bound to
+/// each object's volume and counts) at T_volume_camera `poses`:
+/// frame.associations [0] the background, [k + 1] models[k]. associate's
+/// E-step over a map's objects; tracking an object back (track_back.hpp)
+/// gives it one object at a pose of its own. `background_unchanged`: as
+/// e_step's.
+template <class S, Backend B, class Likelihood>
+  requires VolumeLikelihood<Likelihood, S>
+void associate_with(const BackgroundVolume<S, B>& background, const SE3<S>& T_world_camera,
+                    const std::vector<Likelihood>& models, const std::vector<SE3<S>>& poses, Frame<S, B>& frame,
+                    const Likelihood& likelihood, bool background_unchanged = false) {
+  const SE3<S> T_background_camera = background.pose().inverse() * T_world_camera;
+  background.visit([&](const auto& volume) {
+    using View = decltype(volume.view());
+    if constexpr (std::is_same_v<View, TsdfView<S, const S>>) {
+      // A dense background: the same model type as the objects'.
+      e_step(frame.points.backend(), frame.points, bind_volume<S>(likelihood, volume.view()), T_background_camera,
+             std::span<const Likelihood>(models), std::span<const SE3<S>>(poses), frame.associations,
+             background_unchanged);
+    } else {
+      detail::association::e_step_over_sparse(frame, likelihood, volume, T_background_camera, models, poses,
+                                              background_unchanged);
+    }
+  });
+}
+
 /// The E-step for frame.points with the camera at map.T_world_camera and
 /// every object at its pose: `likelihood` (the user's configured model) is
 /// pointed at the background's volume and at each object's volume and
@@ -130,19 +157,7 @@ void associate(const Map<S, B>& map, Frame<S, B>& frame, const Likelihood& likel
     models.push_back(bind_volume<S>(likelihood, object.volume().view(), object.foreground().view()));
     poses.push_back(object.volume().pose().inverse() * map.T_world_camera);
   }
-  const SE3<S> T_background_camera = map.background.pose().inverse() * map.T_world_camera;
-  map.background.visit([&](const auto& background) {
-    using View = decltype(background.view());
-    if constexpr (std::is_same_v<View, TsdfView<S, const S>>) {
-      // A dense background: the same model type as the objects'.
-      e_step(frame.points.backend(), frame.points, bind_volume<S>(likelihood, background.view()), T_background_camera,
-             std::span<const Likelihood>(models), std::span<const SE3<S>>(poses), frame.associations,
-             background_unchanged);
-    } else {
-      detail::association::e_step_over_sparse(frame, likelihood, background, T_background_camera, models, poses,
-                                              background_unchanged);
-    }
-  });
+  associate_with(map.background, map.T_world_camera, models, poses, frame, likelihood, background_unchanged);
 }
 
 /// Eq. 5 for a pixel that one model explains perfectly (its point on the

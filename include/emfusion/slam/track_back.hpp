@@ -17,8 +17,6 @@
 #include <iterator>
 #include <limits>
 #include <optional>
-#include <span>
-#include <type_traits>
 #include <vector>
 
 #include <thrust/functional.h>
@@ -102,27 +100,6 @@ int own_weights(const ObjectModel<S, B>& o, const Image<Vec3<S>, B>& points, con
   return count_own(std::as_const(weights), border);
 }
 
-/// The E-step of frame.points with the background and object `o` alone
-/// (association.hpp's, for one object at a pose of its own), the camera at
-/// T_world_camera and the object's volume at T_volume_camera:
-/// frame.associations [0] the background, [1] the object.
-template <class S, Backend B, class Likelihood>
-void associate_with_background(const BackgroundVolume<S, B>& background, const ObjectModel<S, B>& o,
-                               const SE3<S>& T_world_camera, const SE3<S>& T_volume_camera,
-                               const Likelihood& likelihood, Frame<S, B>& frame) {
-  const std::vector<Likelihood> models{bind_volume<S>(likelihood, o.volume().view(), o.foreground().view())};
-  const std::vector<SE3<S>> poses{T_volume_camera};
-  const SE3<S> T_background_camera = background.pose().inverse() * T_world_camera;
-  background.visit([&](const auto& bg) {
-    using View = decltype(bg.view());
-    if constexpr (std::is_same_v<View, TsdfView<S, const S>>)
-      e_step(frame.points.backend(), frame.points, bind_volume<S>(likelihood, bg.view()), T_background_camera,
-             std::span<const Likelihood>(models), std::span<const SE3<S>>(poses), frame.associations, false);
-    else
-      detail::association::e_step_over_sparse(frame, likelihood, bg, T_background_camera, models, poses, false);
-  });
-}
-
 }  // namespace detail::track_back
 
 /// Object `o` (live, at its pose of the frame just processed, `now`)
@@ -154,6 +131,8 @@ Trajectory track_back(const BackgroundVolume<S, B>& background, const ObjectMode
   const auto scaled = scaled_norm(norm, o.volume().voxel_size());
   const int border = params.visibility_border_for(camera.width);
   const int min_pixels = params.keep_mask_pixels_for(camera.width, camera.height);
+  // Through the const object, as associate binds the objects.
+  const std::vector<Likelihood> model{bind_volume<S>(likelihood, o.volume().view(), o.foreground().view())};
   Frame<S, B> kept;  // a kept frame's points and its E-step
   Image<S, B> weights;
   LinearizationCache<S, B> cache;
@@ -175,16 +154,18 @@ Trajectory track_back(const BackgroundVolume<S, B>& background, const ObjectMode
               .template cast<S>();
       if (is_finite(p)) starts.predicted = in_volume(p);
     }
-    // The weights: the E-step with the background where it gives the object
-    // enough of the frame, else the object's foreground probability.
-    detail::track_back::associate_with_background(background, o, T_wc, starts.previous, likelihood, kept);
-    if (detail::track_back::count_own(std::as_const(kept.associations.image(1)), border) >= min_pixels)
-      weights = kept.associations.image(1);
-    else
+    // The weights: the E-step with the background and this object alone
+    // where it gives the object enough of the frame, else the object's
+    // foreground probability.
+    associate_with(background, T_wc, model, {starts.previous}, kept, likelihood);
+    const Image<S, B>* w = &std::as_const(kept.associations).image(1);
+    if (detail::track_back::count_own(*w, border) < min_pixels) {
       detail::track_back::own_weights(o, points, starts.previous, border, weights);
+      w = &weights;
+    }
     PoseTrack track;
     const SE3<S> T_vc = track_in_volume(
-        o.volume(), points, &weights, starts, scaled, align, solver, params.retry_tracking,
+        o.volume(), points, w, starts, scaled, align, solver, params.retry_tracking,
         [&](const SE3<S>& T, PoseTrack& t) {
           const SE3<S> T_wo = to_world(T);
           t.step = step_between(previous, T_wo);
