@@ -1415,9 +1415,10 @@ TEMPLATE_LIST_TEST_CASE("An object created late is tracked back through the fram
     int history_frames = 0;  // ObjectHistories' tracked_back
     std::vector<int> in_view;  // frame k: the box's rendered pixels inside the visibility border
   };
-  const auto run = [&](int keep, S x0) {
+  const auto run = [&](int keep, S x0, bool use_association = true) {
     SystemParams<S> params = small_params<S>();
     params.track_back_frames = keep;
+    params.use_association = use_association;
     const BoxScene<S> first(box_at(0, x0), 1, true);
     System<S, B> sys(first.camera, params);
     ObjectHistories histories;
@@ -1482,6 +1483,15 @@ TEMPLATE_LIST_TEST_CASE("An object created late is tracked back through the fram
     const double error = largest_error(r, x0);
     INFO("largest error of the poses tracked back: " << error << " m");
     CHECK(error < 0.01);  // the box moved 30 cm over them
+  }
+  SECTION("in the ablation without association: tracked back by the foreground probability") {
+    const S x0 = S(-0.12);
+    const Run r = run(30, x0, false);
+    REQUIRE(r.created.tracked_back.size() == 1);
+    CHECK(r.created.tracked_back[0].frames == detected_at);
+    const double error = largest_error(r, x0);
+    INFO("largest error of the poses tracked back: " << error << " m");
+    CHECK(error < 0.01);
   }
   SECTION("as many frames back as are kept, and none with track_back_frames 0") {
     const S x0 = S(-0.12);

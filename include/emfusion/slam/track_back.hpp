@@ -110,7 +110,8 @@ int own_weights(const ObjectModel<S, B>& o, const Image<Vec3<S>, B>& points, con
 /// weights are the E-step's with `background` and the object alone
 /// (`likelihood`, the system's) where it gives the object at least
 /// keep_mask_pixels of the frame inside the visibility border; where it
-/// does not, the object's foreground probability: before the object
+/// does not, and with params.use_association off (the paper's ablation,
+/// as associate), the object's foreground probability: before the object
 /// existed the background took its points in, and where it stood still
 /// the background explains them as well as the object does. It stops at
 /// the first frame where the solve is refused (tracking_outcome: too few
@@ -155,11 +156,15 @@ Trajectory track_back(const BackgroundVolume<S, B>& background, const ObjectMode
       if (is_finite(p)) starts.predicted = in_volume(p);
     }
     // The weights: the E-step with the background and this object alone
-    // where it gives the object enough of the frame, else the object's
+    // where it gives the object enough of the frame, else (and always in
+    // the ablation without association, as associate) the object's
     // foreground probability.
-    associate_with(background, T_wc, model, {starts.previous}, kept, likelihood);
-    const Image<S, B>* w = &std::as_const(kept.associations).image(1);
-    if (detail::track_back::count_own(*w, border) < min_pixels) {
+    const Image<S, B>* w = nullptr;
+    if (params.use_association) {
+      associate_with(background, T_wc, model, {starts.previous}, kept, likelihood);
+      w = &std::as_const(kept.associations).image(1);
+    }
+    if (!w || detail::track_back::count_own(*w, border) < min_pixels) {
       detail::track_back::own_weights(o, points, starts.previous, border, weights);
       w = &weights;
     }
