@@ -106,7 +106,7 @@ int own_weights(const ObjectModel<S, B>& o, const Image<Vec3<S>, B>& points, con
 /// aligned to the frames of `history` newer than `since`, newest first: each
 /// solve starts from the pose found in the frame after it or, where two
 /// are found, from their constant-velocity motion carried on backwards
-/// (track_in_volume takes the start the frame agrees with better). The
+/// (track_one takes the start the frame agrees with better). The
 /// weights are the E-step's with `background` and the object alone
 /// (`likelihood`, the system's) where it gives the object at least
 /// keep_mask_pixels of the frame inside the visibility border; where it
@@ -118,14 +118,16 @@ int own_weights(const ObjectModel<S, B>& o, const Image<Vec3<S>, B>& points, con
 /// terms, no convergence, a move beyond max_object_motion) or fewer than
 /// keep_mask_pixels of the frame's points inside the border have a
 /// foreground probability above one half at the solved pose (it was not in
-/// view, or hidden). Returns the poses (T_world_object) in time order,
-/// oldest first; `o` keeps its pose.
+/// view, or hidden). Each solve is track_one's (with the library's
+/// LevenbergMarquardt a batch of one: on a GPU without the host in its
+/// iterations); `workspace` keeps its buffers between calls. Returns the
+/// poses (T_world_object) in time order, oldest first; `o` keeps its pose.
 template <class S, Backend B, class Likelihood, class Norm, class Solver>
   requires RobustNorm<Norm, S> && PoseSolver<Solver, S>
 Trajectory track_back(const BackgroundVolume<S, B>& background, const ObjectModel<S, B>& o,
                       const FrameHistory<S, B>& history, double since, double now, const PinholeCamera<S>& camera,
                       const SystemParams<S>& params, const Likelihood& likelihood, const Norm& norm,
-                      const Solver& solver) {
+                      const Solver& solver, TrackingWorkspace<S, B>* workspace = nullptr) {
   Trajectory back;  // newest first while it grows
   const B& backend = o.volume().backend();
   const SdfAlignmentParams<S> align = alignment_params(params, params.object_integration.max_weight);
@@ -136,7 +138,9 @@ Trajectory track_back(const BackgroundVolume<S, B>& background, const ObjectMode
   const std::vector<Likelihood> model{bind_volume<S>(likelihood, o.volume().view(), o.foreground().view())};
   Frame<S, B> kept;  // a kept frame's points and its E-step
   Image<S, B> weights;
-  LinearizationCache<S, B> cache;
+  TrackingWorkspace<S, B> local;
+  TrackingWorkspace<S, B>& ws = workspace ? *workspace : local;
+  LinearizationCache<S, B> cache;  // another solver's than LevenbergMarquardt's
   TimedPose later{now, o.pose().template cast<double>()};  // the pose of the frame after the one solved
   std::optional<TimedPose> latest;                         // ... and of the frame after that
   for (auto it = history.frames.rbegin(); it != history.frames.rend() && it->timestamp > since; ++it) {
@@ -169,15 +173,16 @@ Trajectory track_back(const BackgroundVolume<S, B>& background, const ObjectMode
       w = &weights;
     }
     PoseTrack track;
-    const SE3<S> T_vc = track_in_volume(
-        o.volume(), points, w, starts, scaled, align, solver, params.retry_tracking,
+    const SE3<S> T_vc = track_one(
+        backend, sdf_alignment_in_box(o.volume(), points, w, align, backend), starts, scaled, align, solver,
+        params.retry_tracking,
         [&](const SE3<S>& T, PoseTrack& t) {
           const SE3<S> T_wo = to_world(T);
           t.step = step_between(previous, T_wo);
           t.outcome =
               tracking_outcome(t.report, double(params.min_object_terms), T_wo, t.step, params.max_object_motion);
         },
-        track, cache, backend);
+        track, ws.object_batch, cache);
     if (track.outcome != TrackingOutcome::tracked) break;
     if (detail::track_back::own_weights(o, points, T_vc, border, weights) < min_pixels) break;
     latest = later;
@@ -212,6 +217,7 @@ void track_back_new_objects(Map<S, B>& map, const FrameHistory<S, B>& history, d
   std::vector<int> ids = result.created;
   for (std::size_t k = 0; k < result.reidentified.size() && k < result.found_by.size(); ++k)
     if (result.found_by[k] == FoundBy::detection) ids.push_back(result.reidentified[k]);
+  TrackingWorkspace<S, B> ws;  // the solves' buffers, for all the objects
   for (const auto& o : map.objects) {
     if (std::find(ids.begin(), ids.end(), o->id()) == ids.end() || params.ignores(o->class_name())) continue;
     ObjectRecord& record = map.record_of(o->id());
@@ -220,7 +226,8 @@ void track_back_new_objects(Map<S, B>& map, const FrameHistory<S, B>& history, d
                                             [](const TimedPose& p, double t) { return p.timestamp < t; });
     const double since = first_now == record.trajectory.begin() ? -std::numeric_limits<double>::infinity()
                                                                  : std::prev(first_now)->timestamp;
-    const Trajectory back = track_back(map.background, *o, history, since, now, camera, params, likelihood, norm, solver);
+    const Trajectory back =
+        track_back(map.background, *o, history, since, now, camera, params, likelihood, norm, solver, &ws);
     if (back.empty()) continue;
     record.trajectory.insert(first_now, back.begin(), back.end());
     record.first_timestamp = record.trajectory.front().timestamp;

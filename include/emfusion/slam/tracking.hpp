@@ -115,22 +115,20 @@ struct PoseStarts {
   std::optional<SE3<S>> predicted;
 };
 
-/// Solves one SDF alignment in `volume` (dense or sparse; poses are
-/// T_volume_camera) from
-/// `starts`: from the prediction when the frame agrees with it at least as
-/// well as with the previous pose (agrees_at_least_as_well), else from the
-/// previous pose; with `retry`, once more from the other start when
-/// `judge(T, track)` (which fills track.step and track.outcome from
-/// track.report) does not find the first solve `tracked`. Returns the pose
-/// of the solve taken (the retry's if it was tracked, else the first's) and
-/// fills `track`.
+/// Solves one SDF alignment problem, `terms` (sdf_alignment_in_box's;
+/// poses are T_volume_camera), from `starts`: from the prediction when the
+/// frame agrees with it at least as well as with the previous pose
+/// (agrees_at_least_as_well), else from the previous pose; with `retry`,
+/// once more from the other start when `judge(T, track)` (which fills
+/// track.step and track.outcome from track.report) does not find the first
+/// solve `tracked`. Returns the pose of the solve taken (the retry's if it
+/// was tracked, else the first's) and fills `track`. Any PoseSolver, one
+/// iteration after another through its Linearizer.
 template <class S, Backend B, class Volume, class Norm, class Solver, class Judge>
-  requires TsdfVolumeOn<Volume, S, B> && RobustNorm<Norm, S> && PoseSolver<Solver, S>
-SE3<S> track_in_volume(const Volume& volume, const Image<Vec3<S>, B>& points, const Image<S, B>* association,
-                       const PoseStarts<S>& starts, const Norm& norm, const SdfAlignmentParams<S>& align,
-                       const Solver& solver, bool retry, Judge&& judge, PoseTrack& track,
-                       LinearizationCache<S, B>& cache, const B& backend) {
-  const auto terms = sdf_alignment_in_box(volume, points, association, align, backend);
+  requires RobustNorm<Norm, S> && PoseSolver<Solver, S>
+SE3<S> track_terms(const B& backend, const SdfAlignmentTerms<S, Volume>& terms, const PoseStarts<S>& starts,
+                   const Norm& norm, const SdfAlignmentParams<S>& align, const Solver& solver, bool retry,
+                   Judge&& judge, PoseTrack& track, LinearizationCache<S, B>& cache) {
   const bool predicted_first =
       starts.predicted && agrees_at_least_as_well(backend, terms, norm, align, *starts.predicted, starts.previous);
   const auto solve_from = [&](bool from_prediction, PoseTrack& t) {
@@ -149,6 +147,19 @@ SE3<S> track_in_volume(const Volume& volume, const Image<Vec3<S>, B>& points, co
     track.attempts = 2;
   }
   return T;
+}
+
+/// track_terms for the SDF alignment of `points` (camera frame) in
+/// `volume` (dense or sparse) weighted by `association`, over the box of
+/// its positive pixels.
+template <class S, Backend B, class Volume, class Norm, class Solver, class Judge>
+  requires TsdfVolumeOn<Volume, S, B> && RobustNorm<Norm, S> && PoseSolver<Solver, S>
+SE3<S> track_in_volume(const Volume& volume, const Image<Vec3<S>, B>& points, const Image<S, B>* association,
+                       const PoseStarts<S>& starts, const Norm& norm, const SdfAlignmentParams<S>& align,
+                       const Solver& solver, bool retry, Judge&& judge, PoseTrack& track,
+                       LinearizationCache<S, B>& cache, const B& backend) {
+  return track_terms(backend, sdf_alignment_in_box(volume, points, association, align, backend), starts, norm, align,
+                     solver, retry, std::forward<Judge>(judge), track, cache);
 }
 
 /// track_in_volume for problems k = 0..n-1 at once (solved_in_batches):
@@ -225,6 +236,28 @@ std::vector<SE3<S>> track_in_volumes(const B& backend, const std::vector<SdfAlig
   return T;
 }
 
+/// One problem as track_terms solves it, with the library's
+/// LevenbergMarquardt (solved_in_batches) as a batch of one
+/// (track_in_volumes, in `batch`): the same starts, retry and judgement,
+/// and on a GPU the iterations without the host. Any other solver:
+/// track_terms with `cache`.
+template <class S, Backend B, class Volume, class Norm, class Solver, class Judge>
+  requires RobustNorm<Norm, S> && PoseSolver<Solver, S>
+SE3<S> track_one(const B& backend, const SdfAlignmentTerms<S, Volume>& terms, const PoseStarts<S>& starts,
+                 const Norm& norm, const SdfAlignmentParams<S>& align, const Solver& solver, bool retry, Judge&& judge,
+                 PoseTrack& track, BatchedSolveWorkspace<S, B>& batch, LinearizationCache<S, B>& cache) {
+  if constexpr (solved_in_batches<Solver>) {
+    std::vector<PoseTrack> tracks;
+    const SE3<S> T = track_in_volumes(
+        backend, std::vector{terms}, std::vector{norm}, std::vector{starts}, align, solver, retry,
+        [&](std::size_t, const SE3<S>& T_vc, PoseTrack& t) { judge(T_vc, t); }, tracks, batch)[0];
+    track = tracks[0];
+    return T;
+  } else {
+    return track_terms(backend, terms, starts, norm, align, solver, retry, std::forward<Judge>(judge), track, cache);
+  }
+}
+
 /// Moves map.T_world_camera to its constant-velocity prediction at
 /// `timestamp` (when SystemParams::predict_motion is on and the last two
 /// frames have poses), so that the E-step associates the frame there;
@@ -295,27 +328,14 @@ PoseTrack track_camera(Map<S, B>& map, const Frame<S, B>& frame, const SystemPar
   TrackingWorkspace<S, B>& ws = workspace ? *workspace : local;
   const auto align = camera_alignment_params(params, frame.points.width(), frame.points.height());
   const SE3<S> T_volume_camera = map.background.visit([&](const auto& background) {
-    const auto background_norm = scaled_norm(norm, background.voxel_size());
-    if constexpr (solved_in_batches<Solver>) {
-      std::vector<PoseTrack> tracks;
-      // The background's association is positive nearly everywhere: its
-      // box would be the whole image, and finding it costs a reduction and,
-      // on a GPU, a wait for the host. The terms are those of the box (the
-      // stride's grid starts at the image's corner either way).
-      const auto terms = sdf_alignment_in_box(background, frame.points, &frame.associations.image(0), align,
-                                              PixelBox::whole(frame.points.width(), frame.points.height()));
-      const SE3<S> T = track_in_volumes(background.backend(), std::vector{terms}, std::vector{background_norm},
-                                        std::vector{in_volume}, align, camera_solver(solver, params),
-                                        params.retry_tracking,
-                                        [&](std::size_t, const SE3<S>& T_vc, PoseTrack& tr) { judge(T_vc, tr); },
-                                        tracks, ws.camera_batch)[0];
-      t = tracks[0];
-      return T;
-    } else {
-      return track_in_volume(background, frame.points, &frame.associations.image(0), in_volume, background_norm,
-                             align, camera_solver(solver, params), params.retry_tracking, judge, t, ws.camera_cache,
-                             background.backend());
-    }
+    // The background's association is positive nearly everywhere: its box
+    // would be the whole image, and finding it costs a reduction and, on a
+    // GPU, a wait for the host. The terms are those of the box (the stride's
+    // grid starts at the image's corner either way).
+    const auto terms = sdf_alignment_in_box(background, frame.points, &frame.associations.image(0), align,
+                                            PixelBox::whole(frame.points.width(), frame.points.height()));
+    return track_one(background.backend(), terms, in_volume, scaled_norm(norm, background.voxel_size()), align,
+                     camera_solver(solver, params), params.retry_tracking, judge, t, ws.camera_batch, ws.camera_cache);
   });
   map.T_world_camera = t.outcome == TrackingOutcome::tracked ? T_world_volume * T_volume_camera : from.previous;
   return t;
