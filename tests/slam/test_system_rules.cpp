@@ -753,6 +753,43 @@ TEMPLATE_LIST_TEST_CASE("A lost object is fitted first from its last pose, and o
     CHECK(fit(box, moved, there, 8).first > 0.9);
     CHECK(fit(box, moved, there, 0).first > 0.9);  // 0: not a lost object, no bound
   }
+  SECTION("the solves of many starts in one batch: the fits of solving them one after another") {
+    const auto box_at = [](S x) { return SE3<S>(so3_exp(vec3(S(0.2), S(0.4), S(0))), vec3(x, S(0), S(1.2))); };
+    const Vec3<S> half = vec3(S(0.15), S(0.1), S(0.12));
+    std::vector<S> here, there;
+    const ObjectModel<S, B> box = model_of(frame_of(box_at(S(0)), half, here), here);
+    const Frame<S, B> moved = frame_of(box_at(S(0.06)), half, there);
+    const auto target = target_of(moved, there);
+    const SE3<S> last_seen = box.volume().pose().inverse();
+    std::vector<SE3<S>> starts{last_seen};
+    for (const Mat3<S>& turn : detail::reidentification::cube_turns<S>())
+      starts.push_back(detail::reidentification::start_at_target(box, target, last_seen.rotation(), turn, 1));
+    params.max_object_motion.translation = S(0.02);  // some starts' solves go further than 3 frames allow
+    const LevenbergMarquardt lm{params.lm};
+    const HuberNorm<S> huber{params.huber_voxels};
+    int fits = 0, refused = 0;
+    for (const int frames_lost : {3, 0}) {  // 0: no bound on the move
+      const auto batched = detail::reidentification::fits_from(box, target, moved, SE3<S>::identity(), params, huber,
+                                                               lm, frames_lost, starts);
+      REQUIRE(batched.size() == starts.size());
+      for (std::size_t k = 0; k < starts.size(); ++k) {
+        const auto single = detail::reidentification::fit_from(box, target, moved, SE3<S>::identity(), params, huber,
+                                                               lm, frames_lost, starts[k]);
+        INFO("start " << k << ", lost " << frames_lost << " frames");
+        REQUIRE(bool(batched[k]) == bool(single));
+        if (!single) {
+          ++refused;
+          continue;
+        }
+        ++fits;
+        CHECK(std::fabs(batched[k]->first - single->first) < 0.01);
+        CHECK(double(norm(batched[k]->second.translation() - single->second.translation())) < 1e-3);
+      }
+    }
+    INFO(fits << " fits, " << refused << " refused");
+    CHECK(fits > 10);  // both kinds occur: the comparison covers both
+    CHECK(refused > 10);
+  }
 }
 
 TEMPLATE_LIST_TEST_CASE("A lost object that turned while out of view is found turned", "[slam]",

@@ -27,10 +27,11 @@
 #include "emfusion/robust/norms.hpp"
 #include "emfusion/slam/association.hpp"
 #include "emfusion/slam/detection_masks.hpp"
-#include "emfusion/slam/frame_result.hpp"
 #include "emfusion/slam/frame.hpp"
+#include "emfusion/slam/frame_result.hpp"
 #include "emfusion/slam/map.hpp"
 #include "emfusion/slam/tracking.hpp"
+#include "emfusion/solve/batched_solve.hpp"
 #include "emfusion/solve/sdf_alignment.hpp"
 #include "emfusion/volume/raycast.hpp"
 
@@ -176,14 +177,43 @@ std::optional<DetectionTarget<S, B>> detection_target(const Frame<S, B>& frame, 
   return t;
 }
 
+/// Whether a solve of object `o` to a target (`report`, the solved
+/// T_volume_camera `T`) may be a fit (fit_from): it converged with at least
+/// params.min_object_terms terms and, with `frames_lost` > 0 (a lost
+/// object, lost that many frames ago), it puts the object's box centre no
+/// further from where it was last, and turns it no further, than
+/// frames_lost times params.max_object_motion.
+template <class S, Backend B>
+bool may_be_fit(const ObjectModel<S, B>& o, const SolveReport& report, const SE3<S>& T, const SE3<S>& T_world_camera,
+                const SystemParams<S>& params, int frames_lost) {
+  if (!report.converged() || report.terms < double(params.min_object_terms)) return false;
+  if (frames_lost <= 0) return true;
+  // The move from the last pose: of the box centre, and the turn.
+  const Vec3<S> centre = S(0.5) * o.volume().view().extent();
+  const SE3<S> last = o.volume().pose(), now = T_world_camera * T.inverse();
+  const double moved = double(emfusion::norm(now * centre - last * centre));
+  const double turned = double(emfusion::norm(so3_log((last.inverse() * now).rotation())));
+  const MotionBound<S>& bound = params.max_object_motion;
+  return !MotionBound<S>{S(frames_lost) * bound.translation, S(frames_lost) * bound.rotation_degrees}.exceeded_by(
+      moved, turned);
+}
+
+/// The terms that count a target's points on the surface of object `o`
+/// (with OffSurfaceCount: the detection's own pixels, unit weights).
+template <class S, Backend B>
+auto surface_count_terms(const ObjectModel<S, B>& o, const DetectionTarget<S, B>& target, const Frame<S, B>& frame,
+                         const SystemParams<S>& params) {
+  SdfAlignmentParams<S> count = alignment_params(params, params.object_integration.max_weight);
+  count.use_map_confidence = false;
+  return make_sdf_alignment(o.volume(), frame.points, &target.mask, count);
+}
+
 /// Object `o` aligned (`norm` in its voxels, `solver`) to the target's
 /// points from `start` (T_volume_camera): the share of the points within a
 /// Huber delta of its surface and the solved T_volume_camera; nothing when
-/// the solve did not converge or had fewer than params.min_object_terms
-/// terms, or, with `frames_lost` > 0 (a lost object, lost that many frames
-/// ago), when it puts the object's box centre further from where it was
-/// last, or turns it further, than frames_lost times
-/// params.max_object_motion: the object cannot have moved that far since.
+/// the solve may not be a fit (may_be_fit: no convergence, too few terms,
+/// or, for a lost object lost `frames_lost` frames ago, a move it cannot
+/// have made since).
 template <class S, Backend B, class Norm, class Solver>
 std::optional<std::pair<double, SE3<S>>> fit_from(const ObjectModel<S, B>& o, const DetectionTarget<S, B>& target,
                                                   const Frame<S, B>& frame, const SE3<S>& T_world_camera,
@@ -194,23 +224,58 @@ std::optional<std::pair<double, SE3<S>>> fit_from(const ObjectModel<S, B>& o, co
   SolveReport report;
   const SE3<S> T = align_in_volume(volume, frame.points, &target.mask, start, scaled_norm(norm, volume.voxel_size()),
                                    align, solver, &report);
-  if (!report.converged() || report.terms < double(params.min_object_terms)) return std::nullopt;
-  if (frames_lost > 0) {
-    // The move from the last pose: of the box centre, and the turn.
-    const Vec3<S> centre = S(0.5) * volume.view().extent();
-    const SE3<S> last = volume.pose(), now = T_world_camera * T.inverse();
-    const double moved = double(emfusion::norm(now * centre - last * centre));
-    const double turned = double(emfusion::norm(so3_log((last.inverse() * now).rotation())));
-    const MotionBound<S>& bound = params.max_object_motion;
-    if (MotionBound<S>{S(frames_lost) * bound.translation, S(frames_lost) * bound.rotation_degrees}.exceeded_by(
-            moved, turned))
-      return std::nullopt;
-  }
-  SdfAlignmentParams<S> count = align;
-  count.use_map_confidence = false;
-  const NormalEquations6 n = linearize(frame.points.backend(), make_sdf_alignment(volume, frame.points, &target.mask, count),
+  if (!may_be_fit(o, report, T, T_world_camera, params, frames_lost)) return std::nullopt;
+  const NormalEquations6 n = linearize(frame.points.backend(), surface_count_terms(o, target, frame, params),
                                        OffSurfaceCount<S>{params.huber_voxels * volume.voxel_size()}, T);
   return std::pair{(n.terms - n.cost) / double(target.points), T};
+}
+
+/// fit_from from each of `starts`, in their order. With the library's
+/// LevenbergMarquardt (solved_in_batches) the solves run as one batch
+/// (solve_coarse_to_fine_batch) and the counts of the points on the surface
+/// as another (linearize_batch): on a GPU a few waits for the host instead
+/// of one every iteration of every solve (a re-identification tries up to
+/// 51 starts an object). Any other solver: fit_from, one after another.
+template <class S, Backend B, class Norm, class Solver>
+std::vector<std::optional<std::pair<double, SE3<S>>>> fits_from(const ObjectModel<S, B>& o,
+                                                                const DetectionTarget<S, B>& target,
+                                                                const Frame<S, B>& frame, const SE3<S>& T_world_camera,
+                                                                const SystemParams<S>& params, const Norm& norm,
+                                                                const Solver& solver, int frames_lost,
+                                                                const std::vector<SE3<S>>& starts) {
+  const std::size_t n = starts.size();
+  std::vector<std::optional<std::pair<double, SE3<S>>>> fits(n);
+  if constexpr (!solved_in_batches<Solver>) {
+    for (std::size_t k = 0; k < n; ++k)
+      fits[k] = fit_from(o, target, frame, T_world_camera, params, norm, solver, frames_lost, starts[k]);
+  } else if (n > 0) {
+    const auto& volume = o.volume();
+    const B& backend = frame.points.backend();
+    const SdfAlignmentParams<S> align = alignment_params(params, params.object_integration.max_weight);
+    const auto terms = sdf_alignment_in_box(volume, frame.points, &target.mask, align, backend);
+    const auto scaled = scaled_norm(norm, volume.voxel_size());
+    BatchedSolveWorkspace<S, B> ws;
+    std::vector<SolveReport> reports;
+    const std::vector<SE3<S>> T = solve_coarse_to_fine_batch(backend, std::vector(n, terms), std::vector(n, scaled),
+                                                             align, solver, starts, reports, ws);
+    using Count = BatchedProblem<decltype(surface_count_terms(o, target, frame, params)), OffSurfaceCount<S>>;
+    const Count count{surface_count_terms(o, target, frame, params),
+                      OffSurfaceCount<S>{params.huber_voxels * volume.voxel_size()}};
+    std::vector<Count> counts;
+    std::vector<LinearizationRequest<S>> at;
+    std::vector<std::size_t> which;
+    for (std::size_t k = 0; k < n; ++k) {
+      if (!may_be_fit(o, reports[k], T[k], T_world_camera, params, frames_lost)) continue;
+      LinearizationRequest<S> request;
+      request.T = request.reference = T[k];
+      request.active = 1;
+      counts.push_back(count), at.push_back(request), which.push_back(k);
+    }
+    const std::vector<NormalEquations6> sums = linearize_batch(backend, counts, at, ws);
+    for (std::size_t i = 0; i < which.size(); ++i)
+      fits[which[i]] = std::pair{(sums[i].terms - sums[i].cost) / double(target.points), T[which[i]]};
+  }
+  return fits;
 }
 
 /// A start for aligning object `o` to the target: its last orientation as
@@ -243,16 +308,17 @@ std::pair<double, SE3<S>> fit_to_target(const ObjectModel<S, B>& o, const Detect
                                         const SystemParams<S>& params, const Norm& norm, const Solver& solver,
                                         int frames_lost = 0) {
   const SE3<S> last_seen = o.volume().pose().inverse() * T_world_camera;  // T_volume_camera at its last pose
+  std::vector<SE3<S>> starts{last_seen};
+  for (int h = 0; h < 4; ++h)
+    starts.push_back(start_at_target(o, target, last_seen.rotation(), Mat3<S>::identity(), h));
+  const auto fits = fits_from(o, target, frame, T_world_camera, params, norm, solver, frames_lost, starts);
   double best_inliers = 0, to_beat = 0;
   SE3<S> best_T;
-  for (int h = -1; h < 4; ++h) {
-    const SE3<S> start =
-        h < 0 ? last_seen : start_at_target(o, target, last_seen.rotation(), Mat3<S>::identity(), h);
-    const auto fit = fit_from(o, target, frame, T_world_camera, params, norm, solver, frames_lost, start);
-    if (!fit) continue;
-    const auto [inliers, T] = *fit;
-    if (h < 0) to_beat = inliers + params.reidentify_keep_margin;
-    if (inliers > best_inliers && (h < 0 || inliers > to_beat)) best_inliers = inliers, best_T = T;
+  for (std::size_t k = 0; k < fits.size(); ++k) {
+    if (!fits[k]) continue;
+    const auto [inliers, T] = *fits[k];
+    if (k == 0) to_beat = inliers + params.reidentify_keep_margin;
+    if (inliers > best_inliers && (k == 0 || inliers > to_beat)) best_inliers = inliers, best_T = T;
   }
   return {best_inliers, best_T};
 }
@@ -285,15 +351,18 @@ std::vector<std::pair<double, SE3<S>>> turned_fits(const ObjectModel<S, B>& o, c
                                                    const SystemParams<S>& params, const Norm& norm,
                                                    const Solver& solver, int frames_lost) {
   const Mat3<S> R = (o.volume().pose().inverse() * T_world_camera).rotation();
+  std::vector<SE3<S>> starts;  // h = 1 and 2 of each turn
+  for (const Mat3<S>& turn : cube_turns<S>())
+    for (int h = 1; h <= 2; ++h) starts.push_back(start_at_target(o, target, R, turn, h));
+  const auto tried = fits_from(o, target, frame, T_world_camera, params, norm, solver, frames_lost, starts);
   std::vector<std::pair<double, SE3<S>>> fits;
-  for (const Mat3<S>& turn : cube_turns<S>()) {
-    std::optional<std::pair<double, SE3<S>>> best;
-    for (int h = 1; h <= 2; ++h)
-      if (const auto fit = fit_from(o, target, frame, T_world_camera, params, norm, solver, frames_lost,
-                                    start_at_target(o, target, R, turn, h));
-          fit && (!best || fit->first > best->first))
-        best = fit;
-    if (best) fits.push_back(*best);
+  for (std::size_t k = 0; k + 1 < tried.size(); k += 2) {
+    const auto& a = tried[k];
+    const auto& b = tried[k + 1];
+    if (a && (!b || a->first >= b->first))
+      fits.push_back(*a);
+    else if (b)
+      fits.push_back(*b);
   }
   return fits;
 }
