@@ -197,7 +197,7 @@ class System {
     // the frames kept (track_back_frames; 0 turns it off); then this frame
     // is kept.
     track_back_new_objects(map_, history_, timestamp, camera_, params_, parts_.likelihood, parts_.object_norm,
-                           parts_.solver, result);
+                           parts_.solver, result, &track_back_workspace_);
     history_.keep(frame_.filtered, map_.T_world_camera, timestamp, params_.track_back_frames);
     // Deleted and resized (detector frames) object volumes are freed memory
     // the C library may keep; on the CPU that is resident memory.
@@ -322,6 +322,7 @@ class System {
   Image<S, B> held_background_weights_;     // hold_unexplained's
   SparseIntegrationWorkspace<S, B> sparse_workspace_;
   FrameHistory<S, B> history_;  // the frames objects are tracked back through
+  TrackBackWorkspace<S, B> track_back_workspace_;
   /// The stage times of the frame being processed: on CUDA events queued at
   /// each stage's end and read once at its finish, so the device is not
   /// drained between stages to time them.

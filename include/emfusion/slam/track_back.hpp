@@ -66,6 +66,17 @@ struct FrameHistory {
   }
 };
 
+/// What tracking back allocates, kept between calls (System keeps one): a
+/// kept frame's points and E-step, the object's weights, and the solves'
+/// buffers (on a GPU the graph of their iterations, built once).
+template <class S, Backend B>
+struct TrackBackWorkspace {
+  Frame<S, B> kept;
+  Image<S, B> weights;
+  TrackingWorkspace<S, B> solves;
+  LinearizationCache<S, B> cache;  ///< a solver's other than LevenbergMarquardt
+};
+
 namespace detail::track_back {
 
 /// 1 where pixel i, inside the visibility border, belongs to the object
@@ -120,14 +131,15 @@ int own_weights(const ObjectModel<S, B>& o, const Image<Vec3<S>, B>& points, con
 /// foreground probability above one half at the solved pose (it was not in
 /// view, or hidden). Each solve is track_one's (with the library's
 /// LevenbergMarquardt a batch of one: on a GPU without the host in its
-/// iterations); `workspace` keeps its buffers between calls. Returns the
-/// poses (T_world_object) in time order, oldest first; `o` keeps its pose.
+/// iterations); `workspace` keeps what it allocates between calls.
+/// Returns the poses (T_world_object) in time order, oldest first; `o`
+/// keeps its pose.
 template <class S, Backend B, class Likelihood, class Norm, class Solver>
   requires RobustNorm<Norm, S> && PoseSolver<Solver, S>
 Trajectory track_back(const BackgroundVolume<S, B>& background, const ObjectModel<S, B>& o,
                       const FrameHistory<S, B>& history, double since, double now, const PinholeCamera<S>& camera,
                       const SystemParams<S>& params, const Likelihood& likelihood, const Norm& norm,
-                      const Solver& solver, TrackingWorkspace<S, B>* workspace = nullptr) {
+                      const Solver& solver, TrackBackWorkspace<S, B>* workspace = nullptr) {
   Trajectory back;  // newest first while it grows
   const B& backend = o.volume().backend();
   const SdfAlignmentParams<S> align = alignment_params(params, params.object_integration.max_weight);
@@ -136,11 +148,10 @@ Trajectory track_back(const BackgroundVolume<S, B>& background, const ObjectMode
   const int min_pixels = params.keep_mask_pixels_for(camera.width, camera.height);
   // Through the const object, as associate binds the objects.
   const std::vector<Likelihood> model{bind_volume<S>(likelihood, o.volume().view(), o.foreground().view())};
-  Frame<S, B> kept;  // a kept frame's points and its E-step
-  Image<S, B> weights;
-  TrackingWorkspace<S, B> local;
-  TrackingWorkspace<S, B>& ws = workspace ? *workspace : local;
-  LinearizationCache<S, B> cache;  // another solver's than LevenbergMarquardt's
+  TrackBackWorkspace<S, B> local;
+  TrackBackWorkspace<S, B>& ws = workspace ? *workspace : local;
+  Frame<S, B>& kept = ws.kept;  // a kept frame's points and its E-step
+  Image<S, B>& weights = ws.weights;
   TimedPose later{now, o.pose().template cast<double>()};  // the pose of the frame after the one solved
   std::optional<TimedPose> latest;                         // ... and of the frame after that
   for (auto it = history.frames.rbegin(); it != history.frames.rend() && it->timestamp > since; ++it) {
@@ -182,7 +193,7 @@ Trajectory track_back(const BackgroundVolume<S, B>& background, const ObjectMode
           t.outcome =
               tracking_outcome(t.report, double(params.min_object_terms), T_wo, t.step, params.max_object_motion);
         },
-        track, ws.object_batch, cache);
+        track, ws.solves.object_batch, ws.cache);
     if (track.outcome != TrackingOutcome::tracked) break;
     if (detail::track_back::own_weights(o, points, T_vc, border, weights) < min_pixels) break;
     latest = later;
@@ -206,33 +217,35 @@ Trajectory track_back(const BackgroundVolume<S, B>& background, const ObjectMode
 /// are found on the first that shows enough of them; the frames before show
 /// a part of them, where a fit is a guess (on c215-tab900 of
 /// bench/generalisation.py a bottle found in what no model explained was
-/// tracked back 10-28 cm off through the 13 frames before).
+/// tracked back 10-28 cm off through the 13 frames before). `workspace`
+/// (System keeps one) keeps what tracking back allocates between frames.
 template <class S, Backend B, class Likelihood, class Norm, class Solver>
   requires RobustNorm<Norm, S> && PoseSolver<Solver, S>
-void track_back_new_objects(Map<S, B>& map, const FrameHistory<S, B>& history, double now,
-                            const PinholeCamera<S>& camera, const SystemParams<S>& params,
-                            const Likelihood& likelihood, const Norm& norm, const Solver& solver,
-                            FrameResult& result) {
-  if (params.track_back_frames <= 0 || history.frames.empty()) return;
-  std::vector<int> ids = result.created;
-  for (std::size_t k = 0; k < result.reidentified.size() && k < result.found_by.size(); ++k)
-    if (result.found_by[k] == FoundBy::detection) ids.push_back(result.reidentified[k]);
-  TrackingWorkspace<S, B> ws;  // the solves' buffers, for all the objects
-  for (const auto& o : map.objects) {
-    if (std::find(ids.begin(), ids.end(), o->id()) == ids.end() || params.ignores(o->class_name())) continue;
-    ObjectRecord& record = map.record_of(o->id());
-    // Its poses before this frame end where it was lost (none for a new one).
-    const auto first_now = std::lower_bound(record.trajectory.begin(), record.trajectory.end(), now,
-                                            [](const TimedPose& p, double t) { return p.timestamp < t; });
-    const double since = first_now == record.trajectory.begin() ? -std::numeric_limits<double>::infinity()
-                                                                 : std::prev(first_now)->timestamp;
-    const Trajectory back =
-        track_back(map.background, *o, history, since, now, camera, params, likelihood, norm, solver, &ws);
-    if (back.empty()) continue;
-    record.trajectory.insert(first_now, back.begin(), back.end());
-    record.first_timestamp = record.trajectory.front().timestamp;
-    result.tracked_back.push_back({o->id(), int(back.size())});
+  void track_back_new_objects(Map<S, B>& map, const FrameHistory<S, B>& history, double now,
+                              const PinholeCamera<S>& camera, const SystemParams<S>& params,
+                              const Likelihood& likelihood, const Norm& norm, const Solver& solver, FrameResult& result,
+                              TrackBackWorkspace<S, B>* workspace = nullptr) {
+    if (params.track_back_frames <= 0 || history.frames.empty()) return;
+    std::vector<int> ids = result.created;
+    for (std::size_t k = 0; k < result.reidentified.size() && k < result.found_by.size(); ++k)
+      if (result.found_by[k] == FoundBy::detection) ids.push_back(result.reidentified[k]);
+    TrackBackWorkspace<S, B> local;
+    TrackBackWorkspace<S, B>* ws = workspace ? workspace : &local;
+    for (const auto& o : map.objects) {
+      if (std::find(ids.begin(), ids.end(), o->id()) == ids.end() || params.ignores(o->class_name())) continue;
+      ObjectRecord& record = map.record_of(o->id());
+      // Its poses before this frame end where it was lost (none for a new one).
+      const auto first_now = std::lower_bound(record.trajectory.begin(), record.trajectory.end(), now,
+                                              [](const TimedPose& p, double t) { return p.timestamp < t; });
+      const double since = first_now == record.trajectory.begin() ? -std::numeric_limits<double>::infinity()
+                                                                  : std::prev(first_now)->timestamp;
+      const Trajectory back =
+          track_back(map.background, *o, history, since, now, camera, params, likelihood, norm, solver, ws);
+      if (back.empty()) continue;
+      record.trajectory.insert(first_now, back.begin(), back.end());
+      record.first_timestamp = record.trajectory.front().timestamp;
+      result.tracked_back.push_back({o->id(), int(back.size())});
+    }
   }
-}
 
 }  // namespace emfusion
