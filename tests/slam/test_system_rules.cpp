@@ -1436,6 +1436,48 @@ TEMPLATE_LIST_TEST_CASE("An object that passes behind another moves on at its ve
   }
 }
 
+TEMPLATE_LIST_TEST_CASE("Tracking back's E-step of one object is the E-step's image of it, pixel for pixel", "[slam]",
+                        emfusion::test::SystemRuleConfigs) {
+  using S = typename TestType::Scalar;
+  using B = typename TestType::Backend;
+  // The box (with slats) detected on frame 0 and tracked over three
+  // frames, 1 cm a frame; then a frame with it 2 cm further, as a kept frame
+  // would show it, against the object at its last pose.
+  for (const bool sparse : {true, false}) {
+    SystemParams<S> params = small_params<S>();
+    params.sparse_background = sparse;
+    const auto box_at = [](int k) { return vec3(S(-0.05) + S(0.01) * S(k), S(0), S(1.2)); };
+    FirstFrame<S, B> first("cup", 1, params, box_at(0), true);
+    System<S, B>& sys = first.system;
+    for (int k = 1; k <= 3; ++k)
+      sys.process(BoxScene<S>(box_at(k), 1, true).template depth<B>(SE3<S>::identity()), k / 30.0);
+    REQUIRE(sys.map().objects.size() == 1);
+    const ObjectModel<S, B>& o = *sys.map().objects[0];
+    Frame<S, B> f;
+    back_project(BoxScene<S>(box_at(5), 1, true).template depth<B>(SE3<S>::identity()), first.scene.camera, f.points);
+    const SE3<S> T_vc = o.volume().pose().inverse() * sys.map().T_world_camera;
+    const auto& likelihood = sys.parts().likelihood;
+    const auto model = bind_volume<S>(likelihood, o.volume().view(), o.foreground().view());
+    associate_with(sys.map().background, sys.map().T_world_camera, std::vector{model}, {T_vc}, f, likelihood);
+    Image<S, B> share;
+    detail::track_back::object_share(sys.map().background, sys.map().T_world_camera, model, T_vc, f.points, likelihood,
+                                     share);
+    const std::vector<S> e_step = f.associations.image(1).to_host(), shared = share.to_host();
+    REQUIRE(e_step.size() == shared.size());
+    std::size_t differ = 0, own = 0, partly = 0;
+    for (std::size_t i = 0; i < e_step.size(); ++i) {
+      differ += !(e_step[i] == shared[i]);
+      own += shared[i] > S(0.5);
+      partly += shared[i] > S(0) && shared[i] < S(0.5);
+    }
+    INFO((sparse ? "sparse" : "dense") << " background: " << differ << " pixels differ; " << own << " the object's, "
+                                       << partly << " partly");
+    CHECK(differ == 0);
+    CHECK(own > 500);   // about 1100 pixels are the box's ...
+    CHECK(partly > 0);  // ... and the background shares some of them
+  }
+}
+
 TEMPLATE_LIST_TEST_CASE("An object created late is tracked back through the frames before its creation", "[slam]",
                         emfusion::test::SystemRuleConfigs) {
   using S = typename TestType::Scalar;

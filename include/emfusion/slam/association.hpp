@@ -55,19 +55,6 @@ M rebound(const Prototype& prototype) {
   return model;
 }
 
-/// The E-step with a sparse background: the likelihood's own model over the
-/// sparse view (Likelihood::with_volume) for the background, then the objects.
-template <class S, Backend B, class Likelihood, class Sparse>
-  requires requires { typename Likelihood::template with_volume<typename Sparse::ConstView>; }
-void e_step_over_sparse(Frame<S, B>& frame, const Likelihood& likelihood, const Sparse& background,
-                        const SE3<S>& T_background_camera, const std::vector<Likelihood>& objects,
-                        const std::vector<SE3<S>>& poses, bool background_unchanged) {
-  using Model = typename Likelihood::template with_volume<typename Sparse::ConstView>;
-  const Model model = bind_volume<S>(rebound<Model>(likelihood), background.view());
-  e_step(frame.points.backend(), frame.points, model, T_background_camera, std::span<const Likelihood>(objects),
-         std::span<const SE3<S>>(poses), frame.associations, background_unchanged);
-}
-
 /// Refuses, naming `where`, a sparse background for a likelihood that has no
 /// with_volume (it reads dense volumes only).
 template <class S, class Likelihood>
@@ -80,14 +67,28 @@ void require_sparse_capable(bool sparse_background, const char* where) {
                   "or give it a with_volume member (likelihood/measurement_likelihood.hpp)");
 }
 
-/// A likelihood without with_volume cannot read a sparse background.
-template <class S, Backend B, class Likelihood, class Sparse>
-void e_step_over_sparse(Frame<S, B>&, const Likelihood&, const Sparse&, const SE3<S>&, const std::vector<Likelihood>&,
-                        const std::vector<SE3<S>>&, bool) {
-  require_sparse_capable<S, Likelihood>(true, "associate");
-}
-
 }  // namespace detail::association
+
+/// `f(model)` with `likelihood` (the user's configured model) pointed at
+/// the background's volume, as the E-step reads it: over a dense
+/// background the same model type, over a sparse one the likelihood's own
+/// model of the sparse view (Likelihood::with_volume; a likelihood without
+/// one is refused, naming `where`).
+template <class S, Backend B, class Likelihood, class F>
+void visit_background_model(const BackgroundVolume<S, B>& background, const Likelihood& likelihood, F&& f,
+                            const char* where = "associate") {
+  background.visit([&](const auto& volume) {
+    using View = decltype(volume.view());
+    if constexpr (std::is_same_v<View, TsdfView<S, const S>>) {
+      f(bind_volume<S>(likelihood, volume.view()));
+    } else if constexpr (requires { typename Likelihood::template with_volume<View>; }) {
+      using Model = typename Likelihood::template with_volume<View>;
+      f(bind_volume<S>(detail::association::rebound<Model>(likelihood), volume.view()));
+    } else {
+      detail::association::require_sparse_capable<S, Likelihood>(true, where);
+    }
+  });
+}
 
 /// The ablation without association likelihoods (paper Table 3, Fig. 3):
 /// objects weight a pixel by the foreground probability of its point, the
@@ -120,17 +121,9 @@ void associate_with(const BackgroundVolume<S, B>& background, const SE3<S>& T_wo
                     const std::vector<Likelihood>& models, const std::vector<SE3<S>>& poses, Frame<S, B>& frame,
                     const Likelihood& likelihood, bool background_unchanged = false) {
   const SE3<S> T_background_camera = background.pose().inverse() * T_world_camera;
-  background.visit([&](const auto& volume) {
-    using View = decltype(volume.view());
-    if constexpr (std::is_same_v<View, TsdfView<S, const S>>) {
-      // A dense background: the same model type as the objects'.
-      e_step(frame.points.backend(), frame.points, bind_volume<S>(likelihood, volume.view()), T_background_camera,
-             std::span<const Likelihood>(models), std::span<const SE3<S>>(poses), frame.associations,
-             background_unchanged);
-    } else {
-      detail::association::e_step_over_sparse(frame, likelihood, volume, T_background_camera, models, poses,
-                                              background_unchanged);
-    }
+  visit_background_model(background, likelihood, [&](const auto& model) {
+    e_step(frame.points.backend(), frame.points, model, T_background_camera, std::span<const Likelihood>(models),
+           std::span<const SE3<S>>(poses), frame.associations, background_unchanged);
   });
 }
 

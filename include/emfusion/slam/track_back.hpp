@@ -12,11 +12,13 @@
 #pragma once
 
 #include <algorithm>
+#include <cmath>
 #include <cstddef>
 #include <deque>
 #include <iterator>
 #include <limits>
 #include <optional>
+#include <type_traits>
 #include <vector>
 
 #include <thrust/functional.h>
@@ -24,10 +26,10 @@
 #include "emfusion/core/camera.hpp"
 #include "emfusion/core/image.hpp"
 #include "emfusion/core/parallel.hpp"
+#include "emfusion/likelihood/measurement_likelihood.hpp"
 #include "emfusion/preprocess/vertex_map.hpp"
 #include "emfusion/robust/norms.hpp"
 #include "emfusion/slam/association.hpp"
-#include "emfusion/slam/frame.hpp"
 #include "emfusion/slam/frame_result.hpp"
 #include "emfusion/slam/map.hpp"
 #include "emfusion/slam/motion_prediction.hpp"
@@ -67,17 +69,65 @@ struct FrameHistory {
 };
 
 /// What tracking back allocates, kept between calls (System keeps one): a
-/// kept frame's points and E-step, the object's weights, and the solves'
-/// buffers (on a GPU the graph of their iterations, built once).
+/// kept frame's points, the object's weights, and the solves' buffers (on
+/// a GPU the graph of their iterations, built once).
 template <class S, Backend B>
 struct TrackBackWorkspace {
-  Frame<S, B> kept;
-  Image<S, B> weights;
+  Image<Vec3<S>, B> points;  ///< a kept frame's
+  Image<S, B> share;         ///< the object's share of the E-step (object_share)
+  Image<S, B> weights;       ///< the object's foreground probability (own_weights)
   TrackingWorkspace<S, B> solves;
   LinearizationCache<S, B> cache;  ///< a solver's other than LevenbergMarquardt
 };
 
 namespace detail::track_back {
+
+/// The E-step's association of pixel i to one object beside the background
+/// (EStepBackgroundPixel's image of the object: the same sums in the same
+/// order), with the background's likelihood evaluated only where the
+/// object's is positive: elsewhere the object's share is 0 either way, and
+/// an object covers a small part of the frame.
+template <class S, class MB, class M>
+struct ObjectShare {
+  ImageView<const Vec3<S>> points;
+  MB background;
+  SE3<S> T_background_camera;
+  M object;
+  SE3<S> T_volume_camera;
+  ImageView<S> out;
+  EMF_HD void operator()(int i) const {
+    const Vec3<S> p = points[i];
+    out[i] = S(0);
+    if (!(std::isfinite(p.x()) && std::isfinite(p.y()) && std::isfinite(p.z()))) return;
+    const S l = likelihood_of(object, T_volume_camera * p, p);
+    if (!(l > S(0))) return;
+    S total = S(0);
+    total += likelihood_of(background, T_background_camera * p, p);
+    total += l;
+    out[i] = l * (S(1) / total);
+  }
+};
+
+/// The object's image of the E-step with `background` (camera at
+/// T_world_camera) and `object` alone (at T_volume_camera) for `points`,
+/// into `share`: associate_with's image 1, without evaluating the
+/// background where the object's likelihood is 0.
+template <class S, Backend B, class Likelihood>
+void object_share(const BackgroundVolume<S, B>& background, const SE3<S>& T_world_camera, const Likelihood& object,
+                  const SE3<S>& T_volume_camera, const Image<Vec3<S>, B>& points, const Likelihood& likelihood,
+                  Image<S, B>& share) {
+  if (!share.same_size(points.width(), points.height()))
+    share = Image<S, B>(points.width(), points.height(), S(0), points.backend());
+  const SE3<S> T_background_camera = background.pose().inverse() * T_world_camera;
+  visit_background_model(
+      background, likelihood,
+      [&](const auto& model) {
+        for_each_index(points.backend(), points.size(),
+                       ObjectShare<S, std::decay_t<decltype(model)>, Likelihood>{
+                           points.view(), model, T_background_camera, object, T_volume_camera, share.view()});
+      },
+      "track_back");
+}
 
 /// 1 where pixel i, inside the visibility border, belongs to the object
 /// (its weight, the foreground probability, above one half).
@@ -147,17 +197,16 @@ Trajectory track_back(const BackgroundVolume<S, B>& background, const ObjectMode
   const int border = params.visibility_border_for(camera.width);
   const int min_pixels = params.keep_mask_pixels_for(camera.width, camera.height);
   // Through the const object, as associate binds the objects.
-  const std::vector<Likelihood> model{bind_volume<S>(likelihood, o.volume().view(), o.foreground().view())};
+  const Likelihood model = bind_volume<S>(likelihood, o.volume().view(), o.foreground().view());
   TrackBackWorkspace<S, B> local;
   TrackBackWorkspace<S, B>& ws = workspace ? *workspace : local;
-  Frame<S, B>& kept = ws.kept;  // a kept frame's points and its E-step
   Image<S, B>& weights = ws.weights;
   TimedPose later{now, o.pose().template cast<double>()};  // the pose of the frame after the one solved
   std::optional<TimedPose> latest;                         // ... and of the frame after that
   for (auto it = history.frames.rbegin(); it != history.frames.rend() && it->timestamp > since; ++it) {
     if (!it->filtered.same_size(camera.width, camera.height)) break;
-    back_project(it->filtered, camera, kept.points);
-    const Image<Vec3<S>, B>& points = kept.points;
+    back_project(it->filtered, camera, ws.points);
+    const Image<Vec3<S>, B>& points = ws.points;
     const SE3<S>& T_wc = it->T_world_camera;
     const auto in_volume = [&](const SE3<S>& T_wo) { return (T_wo * o.T_object_volume()).inverse() * T_wc; };
     const auto to_world = [&](const SE3<S>& T_vc) { return T_wc * T_vc.inverse() * o.T_object_volume().inverse(); };
@@ -176,8 +225,8 @@ Trajectory track_back(const BackgroundVolume<S, B>& background, const ObjectMode
     // foreground probability.
     const Image<S, B>* w = nullptr;
     if (params.use_association) {
-      associate_with(background, T_wc, model, {starts.previous}, kept, likelihood);
-      w = &std::as_const(kept.associations).image(1);
+      detail::track_back::object_share(background, T_wc, model, starts.previous, points, likelihood, ws.share);
+      w = &std::as_const(ws.share);
     }
     if (!w || detail::track_back::count_own(*w, border) < min_pixels) {
       detail::track_back::own_weights(o, points, starts.previous, border, weights);
