@@ -12,7 +12,6 @@
 #pragma once
 
 #include <algorithm>
-#include <cmath>
 #include <cstddef>
 #include <deque>
 #include <iterator>
@@ -98,7 +97,7 @@ struct ObjectShare {
   EMF_HD void operator()(int i) const {
     const Vec3<S> p = points[i];
     out[i] = S(0);
-    if (!(std::isfinite(p.x()) && std::isfinite(p.y()) && std::isfinite(p.z()))) return;
+    if (!is_valid(p)) return;
     const S l = likelihood_of(object, T_volume_camera * p, p);
     if (!(l > S(0))) return;
     S total = S(0);
@@ -270,31 +269,31 @@ Trajectory track_back(const BackgroundVolume<S, B>& background, const ObjectMode
 /// (System keeps one) keeps what tracking back allocates between frames.
 template <class S, Backend B, class Likelihood, class Norm, class Solver>
   requires RobustNorm<Norm, S> && PoseSolver<Solver, S>
-  void track_back_new_objects(Map<S, B>& map, const FrameHistory<S, B>& history, double now,
-                              const PinholeCamera<S>& camera, const SystemParams<S>& params,
-                              const Likelihood& likelihood, const Norm& norm, const Solver& solver, FrameResult& result,
-                              TrackBackWorkspace<S, B>* workspace = nullptr) {
-    if (params.track_back_frames <= 0 || history.frames.empty()) return;
-    std::vector<int> ids = result.created;
-    for (std::size_t k = 0; k < result.reidentified.size() && k < result.found_by.size(); ++k)
-      if (result.found_by[k] == FoundBy::detection) ids.push_back(result.reidentified[k]);
-    TrackBackWorkspace<S, B> local;
-    TrackBackWorkspace<S, B>* ws = workspace ? workspace : &local;
-    for (const auto& o : map.objects) {
-      if (std::find(ids.begin(), ids.end(), o->id()) == ids.end() || params.ignores(o->class_name())) continue;
-      ObjectRecord& record = map.record_of(o->id());
-      // Its poses before this frame end where it was lost (none for a new one).
-      const auto first_now = std::lower_bound(record.trajectory.begin(), record.trajectory.end(), now,
-                                              [](const TimedPose& p, double t) { return p.timestamp < t; });
-      const double since = first_now == record.trajectory.begin() ? -std::numeric_limits<double>::infinity()
-                                                                  : std::prev(first_now)->timestamp;
-      const Trajectory back =
-          track_back(map.background, *o, history, since, now, camera, params, likelihood, norm, solver, ws);
-      if (back.empty()) continue;
-      record.trajectory.insert(first_now, back.begin(), back.end());
-      record.first_timestamp = record.trajectory.front().timestamp;
-      result.tracked_back.push_back({o->id(), int(back.size())});
-    }
+void track_back_new_objects(Map<S, B>& map, const FrameHistory<S, B>& history, double now,
+                            const PinholeCamera<S>& camera, const SystemParams<S>& params,
+                            const Likelihood& likelihood, const Norm& norm, const Solver& solver, FrameResult& result,
+                            TrackBackWorkspace<S, B>* workspace = nullptr) {
+  if (params.track_back_frames <= 0 || history.frames.empty()) return;
+  std::vector<int> ids = result.created;
+  for (std::size_t k = 0; k < result.reidentified.size() && k < result.found_by.size(); ++k)
+    if (result.found_by[k] == FoundBy::detection) ids.push_back(result.reidentified[k]);
+  TrackBackWorkspace<S, B> local;
+  TrackBackWorkspace<S, B>* ws = workspace ? workspace : &local;
+  for (const auto& o : map.objects) {
+    if (std::find(ids.begin(), ids.end(), o->id()) == ids.end() || params.ignores(o->class_name())) continue;
+    ObjectRecord& record = map.record_of(o->id());
+    // Its poses before this frame end where it was lost (none for a new one).
+    const auto first_now = std::lower_bound(record.trajectory.begin(), record.trajectory.end(), now,
+                                            [](const TimedPose& p, double t) { return p.timestamp < t; });
+    const double since = first_now == record.trajectory.begin() ? -std::numeric_limits<double>::infinity()
+                                                                : std::prev(first_now)->timestamp;
+    const Trajectory back =
+        track_back(map.background, *o, history, since, now, camera, params, likelihood, norm, solver, ws);
+    if (back.empty()) continue;
+    record.trajectory.insert(first_now, back.begin(), back.end());
+    record.first_timestamp = record.trajectory.front().timestamp;
+    result.tracked_back.push_back({o->id(), int(back.size())});
   }
+}
 
 }  // namespace emfusion
