@@ -1046,6 +1046,12 @@ TEMPLATE_LIST_TEST_CASE("Stages alone: an object's refused solves that agree on 
   SystemParams<S> bad = m.s.params;
   bad.confirm_jump_frames = -1;
   CHECK_THROWS_WITH(bad.validate(), EMF_CONTAINS("confirm_jump_frames must not be negative"));
+  bad = m.s.params;
+  bad.reidentify_turned_keep = -1;
+  CHECK_THROWS_WITH(bad.validate(), EMF_CONTAINS("reidentify_turned_keep must not be negative"));
+  bad = m.s.params;
+  bad.reidentify_turned_rank_iterations = 0;
+  CHECK_THROWS_WITH(bad.validate(), EMF_CONTAINS("reidentify_turned_rank_iterations must be at least 1"));
 }
 
 TEMPLATE_LIST_TEST_CASE("Every object's pixel counts in one pass equal each object's own reduction", "[slam]",

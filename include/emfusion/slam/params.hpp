@@ -171,6 +171,16 @@ struct SystemParams {
   /// objects": an object that turned while out of view). 0: the last
   /// orientation only.
   double reidentify_turn_below = 0.9;
+  /// The turned starts (reidentify_turn_below) in two rounds, with the
+  /// library's Levenberg-Marquardt: every start solved for
+  /// reidentify_turned_rank_iterations iterations, then only this many,
+  /// those with the largest share of the detection's points on the surface
+  /// there, solved again from their starts to the end (the fits solving
+  /// every start gives them; docs/system.md, "Lost objects"). 0: every
+  /// start solved to the end.
+  int reidentify_turned_keep = 0;
+  /// The iterations of the first round of reidentify_turned_keep (at least 1).
+  int reidentify_turned_rank_iterations = 3;
   /// A detection re-identifies a lost object with at least this fraction
   /// of min_mask_pixels points of its own (creating an object takes all of
   /// them, the paper's 40x40 pixels): the known model, its fit and its
@@ -388,6 +398,8 @@ struct SystemParams {
                     "reidentify_keep_margin must be in [0, 1]");
     detail::require(reidentify_turn_below >= 0 && reidentify_turn_below <= 1, w,
                     "reidentify_turn_below must be in [0, 1]");
+    detail::require(reidentify_turned_keep >= 0, w, "reidentify_turned_keep must not be negative (0: every start)");
+    detail::require(reidentify_turned_rank_iterations >= 1, w, "reidentify_turned_rank_iterations must be at least 1");
     detail::require(reidentify_mask_fraction > 0 && reidentify_mask_fraction <= 1, w,
                     "reidentify_mask_fraction must be in (0, 1]");
     detail::require(merge_min_inliers >= 0 && merge_min_inliers <= 1, w, "merge_min_inliers must be in [0, 1]");

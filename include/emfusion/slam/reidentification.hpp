@@ -341,10 +341,47 @@ std::vector<Mat3<S>> cube_turns() {
   return turns;
 }
 
+/// Which of `starts` turned_fits solves to the end, in their order: all of
+/// them, or, with params.reidentify_turned_keep > 0 and fewer kept than
+/// there are starts (solved_in_batches only), the reidentify_turned_keep
+/// whose fits (fits_from) after params.reidentify_turned_rank_iterations
+/// Levenberg-Marquardt iterations put the largest share of the target's
+/// points on the surface (ties: the earlier start); a start whose short
+/// solve may not be a fit is not kept. On the CPU, where a batch solves
+/// its problems one after another, the 46 turned solves were most of a
+/// re-identification (docs/decisions.md, "Fewer turned starts carried to
+/// the end").
+template <class S, Backend B, class Norm, class Solver>
+std::vector<std::size_t> ranked_starts(const ObjectModel<S, B>& o, const DetectionTarget<S, B>& target,
+                                       const Frame<S, B>& frame, const SE3<S>& T_world_camera,
+                                       const SystemParams<S>& params, const Norm& norm, const Solver& solver,
+                                       int frames_lost, const std::vector<SE3<S>>& starts) {
+  std::vector<std::size_t> kept(starts.size());
+  for (std::size_t k = 0; k < kept.size(); ++k) kept[k] = k;
+  if constexpr (solved_in_batches<Solver>) {
+    const std::size_t keep = std::size_t(std::max(params.reidentify_turned_keep, 0));
+    if (keep == 0 || keep >= starts.size()) return kept;
+    Solver brief = solver;
+    brief.params.max_iterations = params.reidentify_turned_rank_iterations;
+    const auto ranked = fits_from(o, target, frame, T_world_camera, params, norm, brief, frames_lost, starts);
+    std::erase_if(kept, [&](std::size_t k) { return !ranked[k]; });
+    std::stable_sort(kept.begin(), kept.end(),
+                     [&](std::size_t a, std::size_t b) { return ranked[a]->first > ranked[b]->first; });
+    if (kept.size() > keep) kept.resize(keep);
+    std::sort(kept.begin(), kept.end());
+  }
+  return kept;
+}
+
 /// Object `o` aligned to the target from its last orientation turned by
 /// each of cube_turns (start_at_target, h = 1 and 2, the better kept): one
 /// fit per turn that converged (fit_from), for an object that turned while
-/// it was out of view.
+/// it was out of view. With params.reidentify_turned_keep > 0 and the
+/// library's Levenberg-Marquardt (solved_in_batches), in two rounds: every
+/// start solved for reidentify_turned_rank_iterations iterations, then
+/// only the reidentify_turned_keep starts with the most points on the
+/// surface there solved again, from the start, to the end (ranked_starts):
+/// those fits are the ones solving every start gives them.
 template <class S, Backend B, class Norm, class Solver>
 std::vector<std::pair<double, SE3<S>>> turned_fits(const ObjectModel<S, B>& o, const DetectionTarget<S, B>& target,
                                                    const Frame<S, B>& frame, const SE3<S>& T_world_camera,
@@ -354,7 +391,13 @@ std::vector<std::pair<double, SE3<S>>> turned_fits(const ObjectModel<S, B>& o, c
   std::vector<SE3<S>> starts;  // h = 1 and 2 of each turn
   for (const Mat3<S>& turn : cube_turns<S>())
     for (int h = 1; h <= 2; ++h) starts.push_back(start_at_target(o, target, R, turn, h));
-  const auto tried = fits_from(o, target, frame, T_world_camera, params, norm, solver, frames_lost, starts);
+  std::vector<std::optional<std::pair<double, SE3<S>>>> tried(starts.size());
+  const std::vector<std::size_t> kept =
+      ranked_starts(o, target, frame, T_world_camera, params, norm, solver, frames_lost, starts);
+  std::vector<SE3<S>> from;
+  for (const std::size_t k : kept) from.push_back(starts[k]);
+  const auto solved = fits_from(o, target, frame, T_world_camera, params, norm, solver, frames_lost, from);
+  for (std::size_t i = 0; i < kept.size(); ++i) tried[kept[i]] = solved[i];
   std::vector<std::pair<double, SE3<S>>> fits;
   for (std::size_t k = 0; k + 1 < tried.size(); k += 2) {
     const auto& a = tried[k];
