@@ -72,6 +72,7 @@
 #include "emfusion/io/run_report.hpp"
 #include "emfusion/io/trajectory_stream.hpp"
 #include "emfusion/io/tum.hpp"
+#include "emfusion/preprocess/intensity.hpp"
 #include "emfusion/sim/detector.hpp"
 #include "emfusion/sim/dynamic_scene.hpp"
 #include "emfusion/slam/object_history.hpp"
@@ -598,6 +599,11 @@ void run(const RunOptions& o) {
     settings(json);
     write_json_file((out / "run.json").string(), json);
   }
+  // Colour asked for where there is none: say so once, and go on with depth.
+  if (system.params().object_colour_weight > S(0) && first < frames && !in.colour(first))
+    fmt::print(stderr,
+               "note: '{}' has no colour images: object_colour_weight is set, objects are tracked on depth alone\n",
+               o.input);
   StreamedOutputs streams(o.output);
   FrameLog frame_log((out / "frames.csv").string(), resumed_frame_log(o.resume, first));
   // The trajectories so far, from the checkpoint: the files come out as
@@ -617,7 +623,17 @@ void run(const RunOptions& o) {
     const double t = in.timestamp(i);
     const Image<S, B> depth = in.depth(i).template to<B>(backend);
     const std::optional<Detections> det = in.detect(int(i), t);
-    const FrameResult r = system.process(depth, t, det ? &*det : nullptr);
+    // The objects' colour (object_colour_weight) takes the frame's gray values.
+    const std::optional<ColourImage> colour =
+        system.params().object_colour_weight > S(0) ? in.colour(i) : std::optional<ColourImage>{};
+    Image<S, B> intensity;
+    if (colour && (colour->width() != in.camera.width || colour->height() != in.camera.height))
+      throw std::runtime_error("'" + o.input + "' frame " + std::to_string(i) + ": its colour image is " +
+                               std::to_string(colour->width()) + "x" + std::to_string(colour->height()) +
+                               ", the camera's " + std::to_string(in.camera.width) + "x" +
+                               std::to_string(in.camera.height));
+    if (colour) intensity_image(*colour, intensity, backend);
+    const FrameResult r = system.process(depth, t, det ? &*det : nullptr, colour ? &intensity : nullptr);
     histories.add(r, system.map());
     processed = i + 1;
     streams.update(system.camera_trajectory(), system.object_records());
@@ -625,7 +641,7 @@ void run(const RunOptions& o) {
     if (o.checkpoint_every > 0 && processed % std::size_t(o.checkpoint_every) == 0 && processed < frames)
       save_checkpoint(checkpoint, system);
     times.push_back(r.times);
-    if (o.pictures) write_pictures(pictures, i, in.colour(i), system, r);
+    if (o.pictures) write_pictures(pictures, i, colour ? colour : in.colour(i), system, r);
     if (o.verbose) {
       // On a terminal, each message starts a line of its own after the progress line.
       const char* const nl = tty ? "\n" : "";

@@ -40,7 +40,8 @@ struct CheckpointScene {
   }
   /// The paper's tracking, or (`tracking_options`) with everything that keeps
   /// state between frames beyond the poses: motion prediction from the last
-  /// two poses, retries from the other start and a depth pyramid.
+  /// two poses, retries from the other start, a depth pyramid and colour in
+  /// the objects' models.
   static SystemParams<S> params(bool tracking_options = false, bool sparse = false) {
     SystemParams<S> p;
     p.background_voxels = 128;
@@ -50,15 +51,22 @@ struct CheckpointScene {
     p.predict_motion = tracking_options;
     p.retry_tracking = tracking_options;
     p.pyramid_levels = tracking_options ? 2 : 1;
+    p.object_colour_weight = tracking_options ? S(10) : S(0);
     return p;
   }
-  /// Frame i into `system`.
+  /// Frame i into `system`, with gray values: a ramp across the box, the
+  /// rest dark.
   template <class B, class Sys>
   void feed(Sys& system, int i) const {
     Image<int, Host> labels;
     Image<S, Host> depth;
     sim::render_depth(scene(i), camera, camera_pose(i), depth, &labels);
     const double t = 0.1 * i;
+    std::vector<S> gray;
+    const std::vector<int> shape = labels.to_host();
+    for (std::size_t k = 0; k < shape.size(); ++k)
+      gray.push_back(shape[k] == 1 ? S(0.3) + S(0.5) * S(k % std::size_t(camera.width)) / S(camera.width) : S(0.2));
+    const Image<S, B> intensity = Image<S, Host>::from_host(camera.width, camera.height, gray).template to<B>();
     if (i % 2 == 0) {
       Detections d;
       d.timestamp = t;
@@ -66,9 +74,9 @@ struct CheckpointScene {
       for (int l : labels.to_host()) px.push_back(std::uint16_t(l == 1 ? 5 : 0));
       d.labels = Image<std::uint16_t, Host>::from_host(labels.width(), labels.height(), px);
       d.instances.push_back({5, "cup", 0.95});
-      system.process(depth.template to<B>(), t, &d);
+      system.process(depth.template to<B>(), t, &d, &intensity);
     } else {
-      system.process(depth.template to<B>(), t);
+      system.process(depth.template to<B>(), t, nullptr, &intensity);
     }
   }
 };
@@ -140,6 +148,8 @@ TEMPLATE_LIST_TEST_CASE("Checkpoints: save, load, continue equals the uninterrup
     CHECK(max_abs_diff(a.trajectory, b.trajectory) <= tolerance);
   }
   REQUIRE(resumed.objects().size() == straight.objects().size());
+  for (std::size_t k = 0; k < straight.objects().size(); ++k)
+    CHECK(resumed.objects()[k]->colour().empty() == !tracking_options);
   for (std::size_t k = 0; k < straight.objects().size(); ++k)
     CHECK(pose_diff(resumed.objects()[k]->pose().template cast<double>(),
                     straight.objects()[k]->pose().template cast<double>()) <= tolerance);
@@ -225,9 +235,9 @@ TEST_CASE("Checkpoints: damaged, foreign, newer and mismatched checkpoints are r
   std::string newer = bytes;
   newer[8] = char(checkpoint_version + 1);
   CHECK(contains(refusal(newer), "version " + std::to_string(checkpoint_version + 1) + " is not supported"));
-  // Versions 1 (a dense background without its kind byte) and 2 (no hidden
-  // times of the records at the end) are still read, and an unknown kind
-  // is refused: payloads rebuilt with a right checksum.
+  // Versions 1 (a dense background without its kind byte), 2 (no hidden
+  // times of the records) and 3 (no colour flags at the end) are still read,
+  // and an unknown kind is refused: payloads rebuilt with a right checksum.
   const auto rebuilt = [&](std::uint32_t version, const std::string& payload) {
     std::string out = bytes.substr(0, 8);
     detail::bytes::put_u32(out, version);
@@ -241,7 +251,12 @@ TEST_CASE("Checkpoints: damaged, foreign, newer and mismatched checkpoints are r
   const std::string payload = bytes.substr(24, bytes.size() - 28);
   const std::size_t records = system.map().records.size();
   REQUIRE(records > 0);
-  const std::string v2_payload = payload.substr(0, payload.size() - 8 * records);
+  // Version 4 ends with a colour flag per object (0: none in this system).
+  const std::size_t colour_flags = system.map().objects.size() + system.map().lost.size();
+  REQUIRE(colour_flags > 0);
+  REQUIRE(payload.substr(payload.size() - colour_flags) == std::string(colour_flags, '\0'));
+  const std::string v3_payload = payload.substr(0, payload.size() - colour_flags);
+  const std::string v2_payload = v3_payload.substr(0, v3_payload.size() - 8 * records);
   std::string kind_and_dims;  // the kind byte (0, dense), then the background's dimensions
   kind_and_dims += '\0';
   for (int a = 0; a < 3; ++a) detail::bytes::put_i32(kind_and_dims, 128);
@@ -257,19 +272,30 @@ TEST_CASE("Checkpoints: damaged, foreign, newer and mismatched checkpoints are r
   emfusion::test::write_bytes(v2, rebuilt(2, v2_payload));
   const Checkpoint<S> two = load_checkpoint<S>(v2);
   CHECK(checkpoint_bytes(two.map, two.camera) == bytes);
+  const std::string v3 = dir.file("v3.emfckpt");
+  emfusion::test::write_bytes(v3, rebuilt(3, v3_payload));
+  const Checkpoint<S> three = load_checkpoint<S>(v3);
+  CHECK(checkpoint_bytes(three.map, three.camera) == bytes);  // no colour
   // The records' hidden times: the last record's, set, comes back; an
   // infinite one is refused, and so are bytes after them.
   const auto with_last_time = [&](double t) {
     std::string p = payload;
     std::string v;
     detail::bytes::put_u64(v, std::bit_cast<std::uint64_t>(t));
-    p.replace(p.size() - 8, 8, v);
+    p.replace(p.size() - colour_flags - 8, 8, v);
     return rebuilt(checkpoint_version, p);
   };
   emfusion::test::write_bytes(bad, with_last_time(1.25));
   CHECK(load_checkpoint<S>(bad).map.records.back().hidden_since == 1.25);
   CHECK(contains(refusal(with_last_time(INFINITY)), "infinite hidden time"));
-  CHECK(contains(refusal(rebuilt(checkpoint_version, payload + "12345678")), "bytes follow the records' hidden times"));
+  CHECK(contains(refusal(rebuilt(3, v3_payload + "12345678")), "bytes follow the records' hidden times"));
+  CHECK(contains(refusal(rebuilt(checkpoint_version, payload + "12345678")), "bytes follow the objects' colour"));
+  // A colour flag other than 0 or 1, and a colour that is not there.
+  std::string flag = payload;
+  flag.back() = 2;
+  CHECK(contains(refusal(rebuilt(checkpoint_version, flag)), "an object's colour flag must be 0 or 1, got 2"));
+  flag.back() = 1;
+  CHECK(contains(refusal(rebuilt(checkpoint_version, flag)), "an object's gray values"));
   std::string unknown_kind = payload;
   unknown_kind[kind_at] = 2;
   CHECK(contains(refusal(rebuilt(checkpoint_version, unknown_kind)), "unknown background kind 2"));

@@ -10,7 +10,9 @@
 // space the background never saw unexplained only in front of a surface it
 // saw), two models of one object merged, and an object's refused solves
 // taken when they agree from frame to frame; then the full system with a
-// likelihood, a norm and a solver defined here, as a user would.
+// likelihood, a norm and a solver defined here, as a user would, and with
+// colour in its objects' models (object_colour_weight).
+#include <algorithm>
 #include <cmath>
 #include <cstdint>
 #include <random>
@@ -1097,4 +1099,68 @@ TEMPLATE_LIST_TEST_CASE("Every object's pixel counts in one pass equal each obje
     }
   }
   CHECK(all_object_pixels(frame, 0, 0, ws).empty());
+}
+
+TEMPLATE_LIST_TEST_CASE("With object_colour_weight, objects take the frame's gray values and use them",
+                        "[slam][colour]", emfusion::test::HeavyConfigs) {
+  using S = typename TestType::Scalar;
+  using B = typename TestType::Backend;
+  WallAndBox<S> s;
+  Image<int, Host> labels;
+  const Image<S, B> first = s.template depth<B>(SE3<S>::identity(), &labels);
+  const Detections det = box_detection(labels, "cup");
+  // The box light (0.8), everything else dark (0.2).
+  const auto gray = [&](const Image<int, Host>& shapes) {
+    std::vector<S> g;
+    for (int l : shapes.to_host()) g.push_back(l == 1 ? S(0.8) : S(0.2));
+    return Image<S, Host>::from_host(shapes.width(), shapes.height(), g).template to<B>();
+  };
+  SystemParams<S> coloured = s.params;
+  coloured.object_colour_weight = S(10);
+  System<S, B> with_colour(s.camera, coloured), without_intensity(s.camera, coloured), depth_alone(s.camera, s.params);
+  const Image<S, B> first_gray = gray(labels);
+  with_colour.process(first, 0.0, &det, &first_gray);
+  without_intensity.process(first, 0.0, &det);
+  depth_alone.process(first, 0.0, &det, &first_gray);  // weight 0: the gray values are not used
+  for (int k = 1; k <= 3; ++k) {
+    const SE3<S> pose = SE3<S>::translation(vec3(S(0.01) * S(k), S(0), S(0)));
+    Image<int, Host> shapes;
+    const Image<S, B> d = s.template depth<B>(pose, &shapes);
+    const Image<S, B> g = gray(shapes);
+    const FrameResult r = with_colour.process(d, k / 30.0, nullptr, &g);
+    without_intensity.process(d, k / 30.0);
+    depth_alone.process(d, k / 30.0, nullptr, &g);
+    REQUIRE(r.object_status.size() == 1);
+    CHECK(r.object_status[0].tracking == TrackingOutcome::tracked);
+    CHECK(double(norm(with_colour.camera_pose().translation() - pose.translation())) < 0.01);
+  }
+  REQUIRE(with_colour.objects().size() == 1);
+  REQUIRE(depth_alone.objects().size() == 1);
+  REQUIRE(without_intensity.objects().size() == 1);
+  // The object's model is coloured, with the box's gray value where the
+  // surface is.
+  const ObjectModel<S, B>& o = *with_colour.objects()[0];
+  REQUIRE(!o.colour().empty());
+  const std::vector<float> value = o.colour().values_to_host(), weight = o.colour().weights_to_host();
+  const auto tsdf = o.volume().template to<Host>();
+  std::vector<float> on_surface;
+  for (std::size_t i = 0; i < value.size(); ++i)
+    if (weight[i] > 0.0f && tsdf.view().weight[i] > S(0) && std::abs(double(tsdf.view().sdf[i])) < 0.005)
+      on_surface.push_back(value[i]);
+  REQUIRE(on_surface.size() > 50);
+  std::nth_element(on_surface.begin(), on_surface.begin() + on_surface.size() / 2, on_surface.end());
+  CHECK(on_surface[on_surface.size() / 2] == emfusion::test::Approx(0.8).margin(0.01));
+  CHECK(o.memory_bytes() > depth_alone.objects()[0]->memory_bytes());
+  // Without gray values, or with weight 0, the models take no colour and the
+  // poses are those of depth alone.
+  CHECK(without_intensity.objects()[0]->colour().empty());
+  CHECK(depth_alone.objects()[0]->colour().empty());
+  CHECK(max_abs_diff(without_intensity.objects()[0]->pose().matrix(), depth_alone.objects()[0]->pose().matrix()) ==
+        S(0));
+  // A gray image of another size is refused, naming it.
+  const Image<S, B> small(8, 6, S(0.5));
+  CHECK_THROWS_WITH(with_colour.process(first, 1.0, nullptr, &small), EMF_CONTAINS("intensity image is 8x6"));
+  SystemParams<S> bad = s.params;
+  bad.object_colour_weight = S(-1);
+  CHECK_THROWS_WITH(bad.validate(), EMF_CONTAINS("object_colour_weight must not be negative"));
 }

@@ -13,6 +13,8 @@
 //                          calibration.txt, groundtruth.txt (the camera at rest
 //                          at the origin), no colour
 //   tum-other-clock.txt    that trajectory 100 s later: no pose matches a frame
+//   tum-colour/            tum/ with colour: rgb.txt, rgb/<t>.png (gray, 64x48)
+//   tum-odd-colour/        the same with colour images of 32x24
 //
 // The scene: a wall 1.2 m away with a box face 0.9 m away in the middle of
 // the image, the same in every frame (a camera at rest).
@@ -26,6 +28,7 @@
 #include <iterator>
 #include <stdexcept>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "emfusion/io/exr.hpp"
@@ -113,6 +116,23 @@ int main(int argc, char** argv) {
     write_text(dir / "tum" / "calibration.txt", calibration);
     write_text(dir / "tum" / "groundtruth.txt", poses);
     write_text(dir / "tum-other-clock.txt", later);
+    // With colour of the camera's size, and of another.
+    Image<std::uint8_t, Host> small(width / 2, height / 2, std::uint8_t(128));
+    for (const auto& [name, colour] : {std::pair{"tum-colour", &grey}, std::pair{"tum-odd-colour", &small}}) {
+      fs::create_directories(dir / name / "depth");
+      fs::create_directories(dir / name / "rgb");
+      std::string rgb_list = "# timestamp filename\n";
+      for (int i = 0; i < frames; ++i) {
+        char t[32];
+        std::snprintf(t, sizeof t, "%.6f", i / 30.0);
+        write_png((dir / name / "depth" / (std::string(t) + ".png")).string(), fifths);
+        write_png((dir / name / "rgb" / (std::string(t) + ".png")).string(), *colour);
+        rgb_list += std::string(t) + " rgb/" + t + ".png\n";
+      }
+      write_text(dir / name / "depth.txt", depth_list);
+      write_text(dir / name / "rgb.txt", rgb_list);
+      write_text(dir / name / "calibration.txt", calibration);
+    }
     std::printf("wrote %s\n", dir.string().c_str());
     return 0;
   } catch (const std::exception& e) {

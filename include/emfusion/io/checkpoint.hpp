@@ -1,5 +1,5 @@
 // Checkpoints: the whole state of a System (its Map: background and object
-// volumes, foreground counts, poses, existence, class scores, lost objects,
+// volumes, foreground counts, the objects' colour, poses, existence, class scores, lost objects,
 // trajectories, records, the frame count; a dense or a sparse background)
 // and its camera in one binary file,
 // so that a run can stop and go on later with the same poses, and meshes of
@@ -42,8 +42,9 @@ namespace emfusion {
 
 /// The version save_checkpoint writes; the reader refuses newer ones.
 /// Version 1 held a dense background only; version 2 says which kind it is;
-/// version 3 adds the records' hidden times (ObjectRecord::hidden_since).
-inline constexpr std::uint32_t checkpoint_version = 3;
+/// version 3 adds the records' hidden times (ObjectRecord::hidden_since);
+/// version 4 the objects' colour (ObjectModel::colour).
+inline constexpr std::uint32_t checkpoint_version = 4;
 /// The first 8 bytes of every checkpoint.
 inline constexpr char checkpoint_magic[8] = {'E', 'M', 'F', 'C', 'K', 'P', 'T', '\0'};
 
@@ -179,6 +180,15 @@ class Writer {
     volume(o.volume());
     compressed(le_bytes(o.foreground().fg_to_host()));
     compressed(le_bytes(o.foreground().bg_to_host()));
+  }
+  /// Version 4: whether the object has colour, and then its gray values
+  /// and colour weights.
+  template <class S, Backend B>
+  void colour(const ObjectModel<S, B>& o) {
+    u8(o.colour().empty() ? 0 : 1);
+    if (o.colour().empty()) return;
+    compressed(le_bytes(o.colour().values_to_host()));
+    compressed(le_bytes(o.colour().weights_to_host()));
   }
 };
 
@@ -366,6 +376,16 @@ class Reader {
         fail("object " + std::to_string(id) + ": its poses overflow");
     return o;
   }
+  /// Version 4: an object's colour, if it was saved with one.
+  template <class S, Backend B>
+  void colour(ObjectModel<S, B>& o) {
+    if (!flag("an object's colour flag")) return;
+    const std::size_t n = std::size_t(o.volume().voxel_count());
+    std::vector<float> values = compressed<float>(n, "an object's gray values");
+    std::vector<float> weights = compressed<float>(n, "an object's colour weights");
+    o.enable_colour();
+    o.colour().assign_from_host(values, weights);
+  }
 
  private:
   const unsigned char* p_;
@@ -441,6 +461,8 @@ std::string checkpoint_bytes(const Map<S, B>& map, const PinholeCamera<S>& camer
     w.object(*l.object);
   }
   for (const ObjectRecord& r : map.records) w.f64(r.hidden_since);  // version 3
+  for (const auto& o : map.objects) w.colour(*o);                   // version 4
+  for (const LostObject<S, B>& l : map.lost) w.colour(*l.object);
 
   std::string out(checkpoint_magic, checkpoint_magic + 8);
   detail::bytes::put_u32(out, checkpoint_version);
@@ -557,9 +579,16 @@ Checkpoint<S, B> parse_checkpoint(const std::string& data, const std::string& so
       rec.hidden_since = r.f64("an object record's hidden time");
       if (std::isinf(rec.hidden_since)) r.fail("object record " + std::to_string(rec.id) + ": infinite hidden time");
     }
+  // Version 4: each live and then each lost object's colour.
+  if (version >= 4) {
+    for (auto& o : map.objects) r.colour(*o);
+    for (LostObject<S, B>& l : map.lost) r.colour(*l.object);
+  }
   if (r.left() != 0)
     r.fail(std::to_string(r.left()) + " bytes follow the " +
-           (version >= 3 ? "records' hidden times" : "last lost object"));
+           (version >= 4   ? "objects' colour"
+            : version >= 3 ? "records' hidden times"
+                           : "last lost object"));
   // Every live and lost object has a record (Map::record_of relies on it).
   const auto has_record = [&](int id) {
     for (const ObjectRecord& rec : map.records)

@@ -97,6 +97,8 @@ const std::vector<ParameterEntry<S>>& parameter_table() {
       EMF_INTEGER("max_object_voxels", max_object_voxels, "largest object volume per axis after resizing"),
       EMF_INTEGER("max_objects", max_objects, "cap on live objects"),
       EMF_NUMBER("huber_voxels", huber_voxels, "Huber delta (voxels of the tracked volume)"),
+      EMF_NUMBER("object_colour_weight", object_colour_weight,
+                 "colour terms in object solves: voxels of SDF residual per unit of gray value (0: depth alone)"),
       EMF_INTEGER("pixel_stride", pixel_stride, "track objects with every n-th pixel in x and y"),
       EMF_INTEGER("pyramid_levels", pyramid_levels, "coarse-to-fine levels of every object solve (1: one level)"),
       EMF_INTEGER("camera_pixel_stride", camera_pixel_stride,

@@ -19,6 +19,9 @@ struct Frame {
   Image<S, B> depth;        ///< the received depth, every invalid pixel a hole (0)
   Image<S, B> filtered;     ///< after the bilateral filter
   Image<Vec3<S>, B> points;  ///< camera frame; NaN where there is no measurement
+  /// The frame's gray values in [0, 1] (preprocess/intensity.hpp) when the
+  /// caller gave them and object_colour_weight uses them; else empty.
+  Image<S, B> intensity;
   /// [0] the background, [k + 1] Map::objects[k], as the last E-step left them.
   Associations<S, B> associations;
   /// Per pixel: -1 nothing drawn and no depth, 0 background, k + 1 Map::objects[k].

@@ -3,7 +3,8 @@
 // image as the per-pixel weight (paper eq. 10; a new object's first frame
 // uses its detection mask), and every object a detection matched or created
 // updates its foreground counts from that detection's mask where no other
-// object covers the pixel (eq. 6).
+// object covers the pixel (eq. 6). With object_colour_weight, every object
+// also fuses the frame's gray values into its colour, with the same weights.
 #pragma once
 
 #include <cstddef>
@@ -18,6 +19,7 @@
 #include "emfusion/slam/params.hpp"
 #include "emfusion/volume/foreground.hpp"
 #include "emfusion/volume/integrate.hpp"
+#include "emfusion/volume/intensity_grid.hpp"
 #include "emfusion/volume/sparse_tsdf_volume.hpp"
 
 namespace emfusion {
@@ -41,7 +43,10 @@ struct ObjectIntegrationWorkspace {
 /// image as its weights (hold_unexplained, unexplained.hpp). The workspaces
 /// (optional) keep the buffers of a dense and of a sparse background, and
 /// `objects_workspace` those of the objects, which then integrate at once
-/// (without it, one after another through `workspace`).
+/// (without it, one after another through `workspace`). With
+/// params.object_colour_weight and the frame's gray values
+/// (frame.intensity), every object's colour takes them too (fuse_intensity,
+/// within its truncation, with its weights).
 template <class S, Backend B>
 void integrate_models(Map<S, B>& map, const Frame<S, B>& frame, const PinholeCamera<S>& camera,
                       const SystemParams<S>& params, const std::vector<NewObjectWeights<S, B>>& fresh, bool first,
@@ -60,21 +65,29 @@ void integrate_models(Map<S, B>& map, const Frame<S, B>& frame, const PinholeCam
   });
   const std::size_t n = map.objects.size();
   const B& backend = frame.depth.backend();
+  // Colour (object_colour_weight): every object fuses the frame's gray
+  // values with the weights of its integration, on its lane too. Grids are
+  // made before the lanes fork, so that the lanes' work follows their fill.
+  const bool coloured = params.object_colour_weight > S(0) && !frame.intensity.empty();
+  if (coloured)
+    for (std::size_t k = 0; k < n; ++k) map.objects[k]->enable_colour();
   if (objects_workspace) {
     if (objects_workspace->objects.size() < n) objects_workspace->objects.resize(n);
     objects_workspace->lanes.fork(backend, n);
   }
   for (std::size_t k = 0; k < n; ++k) {
+    ObjectModel<S, B>& o = *map.objects[k];
     const Image<S, B>* weights =
         k < old_objects ? &frame.associations.image(int(k) + 1) : &fresh[k - old_objects].weights;
-    if (objects_workspace) {
-      const B lane = objects_workspace->lanes.lane(k, backend);
-      integrate(map.objects[k]->volume(), frame.depth, camera, map.T_world_camera, weights, params.object_integration,
+    const B lane = objects_workspace ? objects_workspace->lanes.lane(k, backend) : backend;
+    if (objects_workspace)
+      integrate(o.volume(), frame.depth, camera, map.T_world_camera, weights, params.object_integration,
                 &objects_workspace->objects[k], &lane);
-    } else {
-      integrate(map.objects[k]->volume(), frame.depth, camera, map.T_world_camera, weights, params.object_integration,
-                workspace);
-    }
+    else
+      integrate(o.volume(), frame.depth, camera, map.T_world_camera, weights, params.object_integration, workspace);
+    if (coloured)
+      fuse_intensity(o.colour(), o.volume().pose(), o.volume().truncation(), params.object_integration.max_weight,
+                     frame.depth, frame.intensity, weights, camera, map.T_world_camera, lane);
   }
   if (objects_workspace) objects_workspace->lanes.join(backend, n);
 }

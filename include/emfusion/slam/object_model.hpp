@@ -23,6 +23,7 @@
 #include "emfusion/core/pixel_box.hpp"
 #include "emfusion/core/se3.hpp"
 #include "emfusion/volume/foreground.hpp"
+#include "emfusion/volume/intensity_grid.hpp"
 #include "emfusion/volume/raycast.hpp"
 #include "emfusion/volume/tsdf_volume.hpp"
 
@@ -36,6 +37,8 @@ struct CopyIntoGrown {
   TsdfView<S, S> to;
   ForegroundView<S, const float> fg_from;
   ForegroundView<S, float> fg_to;
+  IntensityView<S, const float> colour_from;  // empty: no colour to copy
+  IntensityView<S, float> colour_to;
   Vec3i offset;
 
   EMF_HD void operator()(std::int64_t i) const {
@@ -45,6 +48,10 @@ struct CopyIntoGrown {
     to.weight[j] = from.weight[i];
     fg_to.fg[j] = fg_from.fg[i];
     fg_to.bg[j] = fg_from.bg[i];
+    if (!colour_from.empty()) {
+      colour_to.value[j] = colour_from.value[i];
+      colour_to.weight[j] = colour_from.weight[i];
+    }
   }
 };
 }  // namespace detail
@@ -99,6 +106,14 @@ class ObjectModel {
   const TsdfVolume<S, B>& volume() const { return volume_; }
   ForegroundCounts<S, B>& foreground() { return foreground_; }
   const ForegroundCounts<S, B>& foreground() const { return foreground_; }
+  /// The model's colour (volume/intensity_grid.hpp): empty until
+  /// enable_colour, then on the volume's grid, growing with it.
+  IntensityGrid<S, B>& colour() { return colour_; }
+  const IntensityGrid<S, B>& colour() const { return colour_; }
+  /// Gives the model an uncoloured IntensityGrid if it has none.
+  void enable_colour() {
+    if (colour_.empty()) colour_ = IntensityGrid<S, B>(volume_.dims(), volume_.voxel_size(), volume_.backend());
+  }
   /// The last raycast of this object: depth and hit, which the system's
   /// segmentation uses (vertices and normals are left empty: render_models
   /// casts with RaycastParams::surface off; raycast the volume for them).
@@ -166,17 +181,26 @@ class ObjectModel {
     const B backend = volume_.backend();
     TsdfVolume<S, B> volume(geometry(dims, s, volume_.truncation() / s), backend);
     ForegroundCounts<S, B> counts(dims, s, backend);
-    detail::CopyIntoGrown<S> f{std::as_const(volume_).view(), volume.view(), std::as_const(foreground_).view(),
-                                counts.view(), below};
+    IntensityGrid<S, B> colour = colour_.empty() ? IntensityGrid<S, B>{} : IntensityGrid<S, B>(dims, s, backend);
+    detail::CopyIntoGrown<S> f{std::as_const(volume_).view(),
+                               volume.view(),
+                               std::as_const(foreground_).view(),
+                               counts.view(),
+                               std::as_const(colour_).view(),
+                               colour.view(),
+                               below};
     for_each_index(backend, volume_.voxel_count(), f);
     volume_ = std::move(volume);
     foreground_ = std::move(counts);
+    colour_ = std::move(colour);
     T_object_volume_ = T_object_volume_ * SE3<S>::translation(-s * vec3(S(below[0]), S(below[1]), S(below[2])));
     sync_volume_pose();
     return true;
   }
 
-  std::size_t memory_bytes() const { return volume_.memory_bytes() + foreground_.memory_bytes(); }
+  std::size_t memory_bytes() const {
+    return volume_.memory_bytes() + foreground_.memory_bytes() + colour_.memory_bytes();
+  }
 
  private:
   ObjectModel(int id, std::string class_name, std::vector<std::pair<std::string, double>> class_scores,
@@ -204,6 +228,7 @@ class ObjectModel {
   SE3<S> T_object_volume_;
   TsdfVolume<S, B> volume_;
   ForegroundCounts<S, B> foreground_;
+  IntensityGrid<S, B> colour_;
   RaycastResult<S, B> rendering_;
   int existence_ = 1;  // the detection that created it
   int non_existence_ = 0;

@@ -73,6 +73,15 @@ struct SystemParams {
   /// camera_converged_step.
   LevenbergMarquardtParams lm = fast_lm();
   int pixel_stride = 1;          ///< object solves use every n-th pixel in x and y
+  /// Colour in the objects' models (volume/intensity_grid.hpp): each
+  /// object fuses the frames' gray values per voxel, and its solves add a
+  /// colour term per pixel, the gray-value difference to the model times
+  /// this many voxels of SDF residual per unit of gray value (so the Huber
+  /// delta of huber_voxels voxels falls at a difference of huber_voxels /
+  /// object_colour_weight). Needs the frames' colour (System::process with
+  /// an intensity image) and the library's Levenberg-Marquardt; 0 (the
+  /// default) aligns depth alone, as the paper does.
+  S object_colour_weight = S(0);
   /// Coarse-to-fine levels of every object solve (SdfAlignmentParams::
   /// pyramid_levels): level l takes every (pixel_stride * 2^l)-th pixel; 1:
   /// the paper's single level.
@@ -357,6 +366,7 @@ struct SystemParams {
                     w, "motion bounds must be positive (infinity: no bound)");
     lm.validate(w);
     detail::require(huber_voxels > S(0), w, "huber_voxels must be positive");
+    detail::require(object_colour_weight >= S(0), w, "object_colour_weight must not be negative (0: depth alone)");
     detail::require(pixel_stride >= 1, w, "pixel_stride must be at least 1");
     detail::require(pyramid_levels >= 1 && pyramid_levels <= 6, w, "pyramid_levels must be in 1..6");
     detail::require(camera_pixel_stride >= 0, w, "camera_pixel_stride must not be negative (0: auto)");

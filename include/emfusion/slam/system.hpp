@@ -105,8 +105,12 @@ class System {
   /// negative or beyond SystemParams::max_depth are holes. A frame whose
   /// camera cannot be tracked (too few terms, a failed solve, a jump beyond
   /// max_camera_motion) keeps the previous poses and is not mapped; the
-  /// result says which (docs/system.md, "Hostile input").
-  FrameResult process(const Image<S, B>& depth, double timestamp, const Detections* detections = nullptr) {
+  /// result says which (docs/system.md, "Hostile input"). `intensity`
+  /// (optional): the frame's gray values in [0, 1] (intensity_image of its
+  /// colour image, camera size), which the objects' colour takes when
+  /// SystemParams::object_colour_weight is positive; otherwise unused.
+  FrameResult process(const Image<S, B>& depth, double timestamp, const Detections* detections = nullptr,
+                      const Image<S, B>* intensity = nullptr) {
     FrameResult result;
     result.frame = map_.frames;
     result.timestamp = timestamp;
@@ -115,6 +119,7 @@ class System {
     clock_.start(backend_);
 
     result.depth = preprocess(depth, camera_, params_, frame_);
+    take_intensity(intensity);
     clock_.lap(result.times.preprocess);
     // Until a frame with enough depth has started the map there is nothing
     // to track against: that frame is mapped at the current pose (the
@@ -252,6 +257,16 @@ class System {
   const Image<Vec3<S>, B>& points() const { return frame_.points; }
 
  private:
+  /// Keeps the frame's gray values for the objects' colour, or none.
+  void take_intensity(const Image<S, B>* intensity) {
+    if (!(params_.object_colour_weight > S(0)) || !intensity) {
+      frame_.intensity = Image<S, B>{};
+      return;
+    }
+    detail::require_image(intensity->view(), camera_.width, camera_.height, "System::process", "intensity image");
+    frame_.intensity = *intensity;
+  }
+
   /// Stages 2 and 3: the E-step at the predicted camera pose (the previous
   /// one without motion prediction), the camera, then (if it was tracked)
   /// the E-step again at the objects' predicted poses and every object, and

@@ -89,6 +89,18 @@ SdfAlignmentParams<S> alignment_params(const SystemParams<S>& params, S max_weig
   return a;
 }
 
+/// Adds object `o`'s colour terms to its solve's `terms`
+/// (object_colour_weight): when the model has colour and the frame its gray
+/// values; otherwise `terms` stay depth alone.
+template <class S, Backend B, class Volume>
+void with_colour(SdfAlignmentTerms<S, Volume>& terms, const ObjectModel<S, B>& o, const Frame<S, B>& frame,
+                 const SystemParams<S>& params) {
+  if (!(params.object_colour_weight > S(0)) || frame.intensity.empty() || o.colour().empty()) return;
+  terms.colour = o.colour().view();
+  terms.intensity = frame.intensity.view();
+  terms.colour_scale = params.object_colour_weight * o.volume().voxel_size();
+}
+
 /// The alignment of the camera's solve: alignment_params with the
 /// background's W_max and the camera's own stride (camera_pixel_stride; 0:
 /// auto_pixel_stride of the frame's size) and camera_pyramid_levels.
@@ -428,6 +440,7 @@ std::vector<PoseTrack> track_objects(Map<S, B>& map, const Frame<S, B>& frame, c
     for (std::size_t j = 0; j < m; ++j) {
       const TsdfVolume<S, B>& volume = map.objects[solved[j]]->volume();
       terms.push_back(sdf_alignment_in_box(volume, frame.points, associations[j], align, boxes[j]));
+      with_colour(terms.back(), *map.objects[solved[j]], frame, params);
       norms.push_back(scaled_norm(norm, volume.voxel_size()));
       const auto world_and_volume = volume_starts(solved[j]);
       from.push_back(world_and_volume.first), in.push_back(world_and_volume.second);

@@ -8,6 +8,15 @@
 // weight can be switched off, as the paper's ablations need. Written once for
 // every volume of the volume concept (volume/volume_view.hpp): the dense
 // TsdfVolume of any storage and the sparse SparseTsdfVolume.
+//
+// Colour terms (beyond the paper; on when SdfAlignmentTerms::colour holds a
+// model's gray values, volume/intensity_grid.hpp): per pixel a second
+// residual r_c = s (c(x) - I(u)), c the model's trilinear gray value at x,
+// I(u) the frame's, s = colour_scale, with the same weight as the pixel's
+// SDF term and Jacobian s grad_t c^T [I | -hat(x)], where grad_t c is c's
+// gradient less its part along the SDF's gradient: across the surface
+// the model's gray values change only with how far from it the voxels were
+// coloured, and the SDF term already fixes that direction.
 #pragma once
 
 #include <algorithm>
@@ -16,15 +25,16 @@
 #include <vector>
 
 #include "emfusion/core/image.hpp"
-#include "emfusion/core/pixel_box.hpp"
 #include "emfusion/core/parallel.hpp"
+#include "emfusion/core/pixel_box.hpp"
 #include "emfusion/core/se3.hpp"
 #include "emfusion/robust/norms.hpp"
-#include "emfusion/volume/nearby_samples.hpp"
 #include "emfusion/solve/batched_solve.hpp"
 #include "emfusion/solve/normal_equations.hpp"
 #include "emfusion/solve/solvers.hpp"
 #include "emfusion/solve/volume_parameter.hpp"
+#include "emfusion/volume/intensity_grid.hpp"
+#include "emfusion/volume/nearby_samples.hpp"
 #include "emfusion/volume/tsdf_volume.hpp"
 #include "emfusion/volume/volume_view.hpp"
 
@@ -200,14 +210,26 @@ struct SdfAlignmentTerms {
     columns = b.x1 > u0 ? (b.x1 - u0 + stride - 1) / stride : 0;
     rows = b.y1 > v0 ? (b.y1 - v0 + stride - 1) / stride : 0;
   }
+  /// Colour terms (solve/sdf_alignment.hpp's header comment): on while the
+  /// model has colour, the frame an intensity image and colour_scale is
+  /// positive.
+  IntensityView<S, const float> colour{};
+  ImageView<const S> intensity;  ///< the frame's gray values in [0, 1]
+  S colour_scale = S(0);         ///< metres of residual per unit of gray value
+
+  EMF_HD bool coloured() const { return colour_scale > S(0) && !colour.empty() && !intensity.empty(); }
   EMF_HD int term_count() const {
     int u0, v0, columns, rows;
     grid(u0, v0, columns, rows);
-    return columns * rows;
+    return columns * rows * (coloured() ? 2 : 1);
   }
   EMF_HD bool term(int i, const SE3<S>& T_volume_camera, S& r, Vec6<S>& J, S& w) const {
     int u0, v0, columns, rows;
     grid(u0, v0, columns, rows);
+    // Terms [0, n) are the pixels' SDF terms, [n, 2n) their colour terms.
+    const int n = columns * rows;
+    const bool colour_term = i >= n;
+    if (colour_term) i -= n;
     const int u = u0 + (i % columns) * stride, v = v0 + (i / columns) * stride;
     const int pixel = v * points.width + u;
     const Vec3<S> p = points[pixel];
@@ -238,9 +260,28 @@ struct SdfAlignmentTerms {
       const S ratio = noise_reference_sigma / kinect_depth_sigma(p.z());
       q *= ratio < S(1) ? ratio * ratio : S(1);
     }
+    if (colour_term && !colour_residual(x, pixel, r, g)) return false;
     const Vec3<S> xg = cross(x, g);
     J = Vec6<S>{{g.x(), g.y(), g.z(), xg.x(), xg.y(), xg.z()}};
     w = q;
+    return true;
+  }
+
+ private:
+  /// The colour term at volume-frame point x of pixel `pixel`, where the
+  /// SDF's gradient is g: r = colour_scale (c(x) - I(u)), and in g the
+  /// gradient of c along the surface (its part along the SDF's gradient
+  /// left out: across the surface the model's colour changes only by how
+  /// far from it the voxels were coloured), scaled alike.
+  EMF_HD bool colour_residual(const Vec3<S>& x, int pixel, S& r, Vec3<S>& g) const {
+    S c;
+    Vec3<S> gc;
+    const S I = intensity[pixel];
+    const S gg = dot(g, g);
+    if (!(gg > S(0)) || !std::isfinite(I) || !colour.sample_with_gradient(x, c, gc)) return false;
+    const Vec3<S> along = gc - (dot(gc, g) / gg) * g;
+    r = colour_scale * (c - I);
+    g = colour_scale * along;
     return true;
   }
 };
