@@ -8,6 +8,7 @@
 // SDF alignment against them, and an object's colour growing with it.
 #include <algorithm>
 #include <cmath>
+#include <utility>
 #include <vector>
 
 #include "emfusion/io/colour.hpp"
@@ -370,6 +371,7 @@ TEMPLATE_LIST_TEST_CASE("An object's colour grows with its volume", "[solve][pho
   using B = typename TestType::Backend;
   ObjectModel<S, B> o(1, "cup", SE3<S>::identity(), 8, S(0.01), S(3));
   CHECK(o.colour().empty());
+  CHECK(std::as_const(o).colour().view().empty());  // what growing an uncoloured object copies nothing from
   const std::size_t plain = o.memory_bytes();
   o.enable_colour();
   REQUIRE(!o.colour().empty());

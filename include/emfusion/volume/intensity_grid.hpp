@@ -103,9 +103,13 @@ class IntensityGrid {
   }
 
  private:
+  // An uncoloured grid's view is the empty one (value == nullptr), which
+  // IntensityView::empty and the copy when an object grows rely on; no
+  // pointer into an empty vector (thrust forms it by dereferencing null),
+  // as in SparseTsdfVolume.
   template <class Vec>
   static auto* raw(Vec& v) {
-    return thrust::raw_pointer_cast(v.data());
+    return v.empty() ? nullptr : thrust::raw_pointer_cast(v.data());
   }
   template <class Vec>
   std::vector<float> to_host(const Vec& v) const {
