@@ -186,8 +186,9 @@ struct SystemParams {
   /// those with the largest share of the detection's points on the surface
   /// there, solved again from their starts to the end (the fits solving
   /// every start gives them; docs/system.md, "Lost objects"). 0: every
-  /// start solved to the end.
-  int reidentify_turned_keep = 0;
+  /// start solved to the end (the whole generalisation benchmark found
+  /// the same fits with 12: docs/decisions.md).
+  int reidentify_turned_keep = 12;
   /// The iterations of the first round of reidentify_turned_keep (at least 1).
   int reidentify_turned_rank_iterations = 3;
   /// A detection re-identifies a lost object with at least this fraction
