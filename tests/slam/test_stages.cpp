@@ -1,7 +1,8 @@
 // The per-frame stages of slam/ called one at a time, without System, on a
 // small scene (a wall, a box in front of it, a floor and a ball): preprocessing, mapping of
 // the first frame, creation of an object from a mask, the E-step at known
-// poses, one camera tracking step, rendering, resizing from a detection,
+// poses, one camera tracking step, rendering (and an object seen through a
+// trace in the background, occlusion_seen_through), resizing from a detection,
 // deletion by the existence rule, and the rules counted only where the
 // object is visible, with unseen and weakly associated objects kept as lost,
 // an object left behind by its tracking moved onto its detection, detections
@@ -255,6 +256,57 @@ TEMPLATE_LIST_TEST_CASE("Stages alone: the E-step at known poses, one tracking s
   CHECK_THROWS_WITH(track_objects(m.map, m.frame, m.s.params, HuberNorm<S>{S(2)}, LevenbergMarquardt{},
                                   no_workspace, no_starts, &wrong_size),
                     EMF_CONTAINS("one skip flag per live object"));
+}
+
+TEMPLATE_LIST_TEST_CASE(
+    "Stages alone: a trace the object left in the background hides it only where the frame "
+    "does not see through the trace (occlusion_seen_through)",
+    "[slam]", emfusion::test::HeavyConfigs) {
+  using S = typename TestType::Scalar;
+  using B = typename TestType::Backend;
+  // The first frame fused the box into the background too. The box then
+  // moved 0.4 m back towards the wall: the background's box, a trace,
+  // stands in front of the object's model, and the frame sees the box
+  // behind it.
+  OneFrameMap<S, B> m;
+  REQUIRE(m.map.objects.size() == 1);
+  const SE3<S> back = SE3<S>::translation(vec3(S(0), S(0), S(0.4)));
+  sim::Scene<S> moved;
+  moved.add(sim::make_plane(sim::look_at(vec3(S(0), S(0), S(2)), Vec3<S>::zero(), vec3(S(0), S(-1), S(0)))));
+  moved.add(sim::make_box(back * SE3<S>(so3_exp(vec3(S(0.2), S(0.4), S(0))), vec3(S(0), S(0), S(1.2))),
+                          vec3(S(0.15), S(0.1), S(0.12))));
+  Image<S, Host> depth;
+  Image<int, Host> labels;
+  sim::render_depth(moved, m.s.camera, SE3<S>::identity(), depth, &labels);
+  preprocess(depth.template to<B>(), m.s.camera, m.s.params, m.frame);
+  m.map.objects[0]->set_pose(back * m.map.objects[0]->pose());
+  const std::vector<int> box = labels.to_host();
+  const auto drawn_on_box = [&](bool seen_through) {
+    m.s.params.occlusion_seen_through = seen_through;
+    render_models(m.map, m.frame, m.s.camera, m.s.params, m.workspace);
+    const std::vector<int> seg = m.frame.segmentation.to_host();
+    int pixels = 0, drawn = 0;
+    for (std::size_t i = 0; i < seg.size(); ++i)
+      if (box[i] == 1) ++pixels, drawn += seg[i] == 1;
+    return double(drawn) / std::max(pixels, 1);
+  };
+  // The paper's rule: behind the trace by more than occlusion_margin, the
+  // object loses most of its pixels.
+  CHECK(drawn_on_box(false) < 0.5);
+  // The frame's depth lies behind the trace too, on the object's surface:
+  // the object keeps them.
+  CHECK(drawn_on_box(true) > 0.8);
+  // Behind the trace but not on the object (the box gone, the frame shows
+  // the wall): the trace hides it still.
+  sim::Scene<S> wall;
+  wall.add(sim::make_plane(sim::look_at(vec3(S(0), S(0), S(2)), Vec3<S>::zero(), vec3(S(0), S(-1), S(0)))));
+  sim::render_depth(wall, m.s.camera, SE3<S>::identity(), depth);
+  preprocess(depth.template to<B>(), m.s.camera, m.s.params, m.frame);
+  CHECK(drawn_on_box(true) < 0.5);
+  // Where the frame shows the trace's surface (the box put back), the
+  // trace hides the object either way.
+  preprocess(m.depth, m.s.camera, m.s.params, m.frame);
+  CHECK(drawn_on_box(true) < 0.5);
 }
 
 TEMPLATE_LIST_TEST_CASE("Stages alone: resizing from a detection, deletion by the existence rule", "[slam]",

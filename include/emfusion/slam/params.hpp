@@ -305,6 +305,14 @@ struct SystemParams {
   // Rendering (sec. 3.5).
   S min_foreground = S(0.5);     ///< object voxels render where p_fg exceeds this
   S occlusion_margin = S(0.05);  ///< an object pixel this far behind the background loses
+  /// An object pixel behind the background keeps its label where the
+  /// frame's depth lies behind the background's surface too (by more than
+  /// occlusion_margin) and on the object's (within it): the frame sees the
+  /// object through that surface, a trace a moving object left in the
+  /// background before the E-step gave its points to the object (beyond
+  /// the paper). false: the background's surface hides the object
+  /// whatever the frame shows.
+  bool occlusion_seen_through = false;
 
   // Ablations (paper Table 3).
   bool use_association = true;     ///< false: q(u) = 1 for tracking and mapping of every model

@@ -9,6 +9,7 @@
 // measured surface stands in front of the model.
 #pragma once
 
+#include <cmath>
 #include <utility>
 
 #include "emfusion/core/camera.hpp"
@@ -63,7 +64,11 @@ struct BackgroundRayEnd {
 
 /// The background wins a pixel where no object was drawn, or where the
 /// object lies more than `margin` behind the background surface (rendered
-/// only where objects were drawn). Pixels without an object are background
+/// only where objects were drawn), unless, with `seen_through`, the frame's
+/// point there lies more than `margin` behind that surface too and within
+/// `margin` of the object's: the frame sees the object through it (a trace
+/// a moving object left in the background), and the object keeps the
+/// pixel. Pixels without an object are background
 /// where the frame has a point, and nothing (-1) elsewhere.
 template <class S>
 struct ResolveBackground {
@@ -72,10 +77,17 @@ struct ResolveBackground {
   ImageView<int> label;
   S margin;
   ImageView<const Vec3<S>> points;
+  bool seen_through = false;
+  /// The frame's point p lies behind the background's surface at depth
+  /// `bg` and on the object's drawn surface at depth `object`.
+  EMF_HD bool shows_object_behind(const Vec3<S>& p, S bg, S object) const {
+    return is_valid(p) && p.z() > bg + margin && std::fabs(p.z() - object) < margin;
+  }
   EMF_HD void operator()(int i) const {
     if (label[i] > 0) {
       const S bg = background.empty() ? S(0) : background[i];
-      if (bg > S(0) && object_depth[i] > bg + margin) label[i] = 0;
+      const bool hidden = bg > S(0) && object_depth[i] > bg + margin;
+      if (hidden && !(seen_through && shows_object_behind(points[i], bg, object_depth[i]))) label[i] = 0;
       return;
     }
     label[i] = is_valid(points[i]) ? 0 : -1;
@@ -156,7 +168,7 @@ void render_models(Map<S, B>& map, Frame<S, B>& frame, const PinholeCamera<S>& c
   for_each_index(backend, w * h,
                  detail::rendering::ResolveBackground<S>{bg, std::as_const(ws.object_depth).view(),
                                                          frame.segmentation.view(), params.occlusion_margin,
-                                                         frame.points.view()});
+                                                         frame.points.view(), params.occlusion_seen_through});
 }
 
 /// frame.segmentation (render_models, with `ws` its workspace) as the
