@@ -56,10 +56,18 @@ struct WallAndBox {
   PinholeCamera<S> camera{S(140), S(140), S(79.5), S(59.5), 160, 120};
   sim::Scene<S> scene;
   SystemParams<S> params;
+  /// The wall, 2 m ahead.
+  static sim::Shape<S> wall() {
+    return sim::make_plane(sim::look_at(vec3(S(0), S(0), S(2)), Vec3<S>::zero(), vec3(S(0), S(-1), S(0))));
+  }
+  /// The box, 1.2 m ahead, moved by `T_moved` (in the world).
+  static sim::Shape<S> box(const SE3<S>& T_moved = SE3<S>::identity()) {
+    return sim::make_box(T_moved * SE3<S>(so3_exp(vec3(S(0.2), S(0.4), S(0))), vec3(S(0), S(0), S(1.2))),
+                         vec3(S(0.15), S(0.1), S(0.12)));
+  }
   WallAndBox() {
-    scene.add(sim::make_plane(sim::look_at(vec3(S(0), S(0), S(2)), Vec3<S>::zero(), vec3(S(0), S(-1), S(0)))));
-    scene.add(sim::make_box(SE3<S>(so3_exp(vec3(S(0.2), S(0.4), S(0))), vec3(S(0), S(0), S(1.2))),
-                            vec3(S(0.15), S(0.1), S(0.12))));
+    scene.add(wall());
+    scene.add(box());
     // A floor and a ball on it, so that every direction of the camera's
     // motion shows in the depth (a wall alone does not fix motion along it).
     scene.add(sim::make_plane(sim::look_at(vec3(S(0), S(0.5), S(0)), Vec3<S>::zero(), vec3(S(0), S(0), S(1)))));
@@ -272,9 +280,8 @@ TEMPLATE_LIST_TEST_CASE(
   REQUIRE(m.map.objects.size() == 1);
   const SE3<S> back = SE3<S>::translation(vec3(S(0), S(0), S(0.4)));
   sim::Scene<S> moved;
-  moved.add(sim::make_plane(sim::look_at(vec3(S(0), S(0), S(2)), Vec3<S>::zero(), vec3(S(0), S(-1), S(0)))));
-  moved.add(sim::make_box(back * SE3<S>(so3_exp(vec3(S(0.2), S(0.4), S(0))), vec3(S(0), S(0), S(1.2))),
-                          vec3(S(0.15), S(0.1), S(0.12))));
+  moved.add(WallAndBox<S>::wall());
+  moved.add(WallAndBox<S>::box(back));
   Image<S, Host> depth;
   Image<int, Host> labels;
   sim::render_depth(moved, m.s.camera, SE3<S>::identity(), depth, &labels);
@@ -299,7 +306,7 @@ TEMPLATE_LIST_TEST_CASE(
   // Behind the trace but not on the object (the box gone, the frame shows
   // the wall): the trace hides it still.
   sim::Scene<S> wall;
-  wall.add(sim::make_plane(sim::look_at(vec3(S(0), S(0), S(2)), Vec3<S>::zero(), vec3(S(0), S(-1), S(0)))));
+  wall.add(WallAndBox<S>::wall());
   sim::render_depth(wall, m.s.camera, SE3<S>::identity(), depth);
   preprocess(depth.template to<B>(), m.s.camera, m.s.params, m.frame);
   CHECK(drawn_on_box(true) < 0.5);
@@ -659,7 +666,7 @@ TEMPLATE_LIST_TEST_CASE("Stages alone: a point in space the background never saw
   s.params.sparse_background = false;
   Map<S, B> map(s.params);
   sim::Scene<S> wall, boxed;
-  wall.add(sim::make_plane(sim::look_at(vec3(S(0), S(0), S(2)), Vec3<S>::zero(), vec3(S(0), S(-1), S(0)))));
+  wall.add(WallAndBox<S>::wall());
   boxed = wall;
   boxed.add(sim::make_box(SE3<S>::translation(vec3(S(0), S(0), S(1.5))), vec3(S(0.1), S(0.1), S(0.1))));
   const auto depth_of = [&](const sim::Scene<S>& scene, Image<int, Host>* labels) {

@@ -183,7 +183,7 @@ const std::vector<ParameterEntry<S>>& parameter_table() {
       EMF_INTEGER("track_back_frames", track_back_frames, "frames kept to track new and found objects back through (0: off)"),
       EMF_NUMBER("min_foreground", min_foreground, "render object voxels above this p_fg"),
       EMF_NUMBER("occlusion_margin", occlusion_margin, "object loses to background this far behind (m)"),
-      EMF_BOOL("occlusion_seen_through", occlusion_seen_through, "... unless the frame's depth lies behind the background there too"),
+      EMF_BOOL("occlusion_seen_through", occlusion_seen_through, "... unless the frame's depth lies behind the background there and on the object"),
       EMF_BOOL("use_association", use_association, "ablation switch: association likelihoods"),
       EMF_BOOL("use_map_confidence", use_map_confidence, "ablation switch: map confidence weights"),
       ParameterEntry<S>{"static_classes", "classes never made objects (comma-separated, or 'none')",
