@@ -15,7 +15,9 @@
 #include <utility>
 #include <vector>
 
+#include <thrust/copy.h>
 #include <thrust/host_vector.h>
+#include <thrust/memory.h>
 #include <thrust/system/cpp/execution_policy.h>
 #if defined(EMFUSION_HAS_OPENMP)
 #include <thrust/system/omp/execution_policy.h>
@@ -343,6 +345,25 @@ void copy_to_host(const Cuda& backend, const T* from, std::size_t n, T* to) {
   backend.synchronize();
 }
 #endif
+
+/// A raw pointer to a backend vector's elements (what kernels and views
+/// take); nullptr for an empty vector, whose data() thrust would form by
+/// dereferencing its first element.
+template <class Vec>
+auto* raw_data(Vec& v) {
+  return v.empty() ? nullptr : thrust::raw_pointer_cast(v.data());
+}
+
+/// The first `count` elements of a backend vector (all of them by default)
+/// in a host vector, once `backend`'s queued work is done.
+template <class B, class Vec>
+std::vector<typename Vec::value_type> vector_to_host(const B& backend, const Vec& v,
+                                                     std::size_t count = std::size_t(-1)) {
+  backend.synchronize();
+  std::vector<typename Vec::value_type> out(std::min(count, std::size_t(v.size())));
+  if (!out.empty()) thrust::copy(v.begin(), v.begin() + std::ptrdiff_t(out.size()), out.begin());
+  return out;
+}
 
 /// What the library needs from a backend.
 template <class B>

@@ -89,12 +89,7 @@ class Image {
   void fill(const T& value) { thrust::fill(backend_.policy(), data_.begin(), data_.end(), value); }
 
   /// The pixels as a host vector (synchronises with the backend).
-  std::vector<T> to_host() const {
-    backend_.synchronize();
-    std::vector<T> out(data_.size());
-    thrust::copy(data_.begin(), data_.end(), out.begin());
-    return out;
-  }
+  std::vector<T> to_host() const { return vector_to_host(backend_, data_); }
 
   /// A copy of this image on another backend.
   template <Backend B2>
@@ -117,8 +112,8 @@ class Image {
     return v;
   }
   // No pointer into an empty vector: thrust forms it by dereferencing null.
-  T* raw() { return data_.empty() ? nullptr : thrust::raw_pointer_cast(data_.data()); }
-  const T* raw() const { return data_.empty() ? nullptr : thrust::raw_pointer_cast(data_.data()); }
+  T* raw() { return raw_data(data_); }
+  const T* raw() const { return raw_data(data_); }
 
   int width_ = 0;
   int height_ = 0;

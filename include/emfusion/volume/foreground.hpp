@@ -136,9 +136,9 @@ class ForegroundCounts {
   /// after it (read through the const view() to keep it).
   View view() {
     majority_known_ = false;
-    return make<View>(raw(fg_), raw(bg_));
+    return make<View>(raw_data(fg_), raw_data(bg_));
   }
-  ConstView view() const { return make<ConstView>(raw(fg_), raw(bg_)); }
+  ConstView view() const { return make<ConstView>(raw_data(fg_), raw_data(bg_)); }
 
   /// The smallest box of voxel indices, [lo, hi) per axis, holding every
   /// voxel with Fg > Bg (p_fg > 1/2); empty (lo = hi = 0) when there is
@@ -157,8 +157,8 @@ class ForegroundCounts {
   }
 
   /// Fg and Bg counts as host vectors (x-fastest), synchronising first.
-  std::vector<Count> fg_to_host() const { return to_host(fg_); }
-  std::vector<Count> bg_to_host() const { return to_host(bg_); }
+  std::vector<Count> fg_to_host() const { return vector_to_host(backend_, fg_); }
+  std::vector<Count> bg_to_host() const { return vector_to_host(backend_, bg_); }
   /// Replaces every count with host values in the layout of fg_to_host and
   /// bg_to_host: how saved counts come back (io/checkpoint.hpp).
   void assign_from_host(const std::vector<Count>& fg, const std::vector<Count>& bg) {
@@ -179,17 +179,6 @@ class ForegroundCounts {
     v.nx = dims_[0], v.ny = dims_[1], v.nz = dims_[2];
     v.voxel_size = voxel_size_;
     return v;
-  }
-  template <class Vec>
-  static auto* raw(Vec& v) {
-    return thrust::raw_pointer_cast(v.data());
-  }
-  template <class Vec>
-  std::vector<Count> to_host(const Vec& v) const {
-    backend_.synchronize();
-    std::vector<Count> out(v.size());
-    thrust::copy(v.begin(), v.end(), out.begin());
-    return out;
   }
 
   Vec3i dims_{{0, 0, 0}};

@@ -82,14 +82,19 @@ class IntensityGrid {
   S voxel_size() const { return voxel_size_; }
   std::size_t memory_bytes() const { return 2 * value_.size() * sizeof(float); }
 
-  IntensityView<S, float> view() { return {raw(value_), raw(weight_), dims_[0], dims_[1], dims_[2], voxel_size_}; }
+  // An uncoloured grid's view is the empty one (value == nullptr, raw_data of
+  // an empty vector), which IntensityView::empty and the copy when an object
+  // grows rely on.
+  IntensityView<S, float> view() {
+    return {raw_data(value_), raw_data(weight_), dims_[0], dims_[1], dims_[2], voxel_size_};
+  }
   IntensityView<S, const float> view() const {
-    return {raw(value_), raw(weight_), dims_[0], dims_[1], dims_[2], voxel_size_};
+    return {raw_data(value_), raw_data(weight_), dims_[0], dims_[1], dims_[2], voxel_size_};
   }
 
   /// Gray values and weights as host vectors (x-fastest), synchronising first.
-  std::vector<float> values_to_host() const { return to_host(value_); }
-  std::vector<float> weights_to_host() const { return to_host(weight_); }
+  std::vector<float> values_to_host() const { return vector_to_host(backend_, value_); }
+  std::vector<float> weights_to_host() const { return vector_to_host(backend_, weight_); }
   /// Replaces every voxel's gray value and weight with host values in the
   /// layout of values_to_host and weights_to_host.
   void assign_from_host(const std::vector<float>& values, const std::vector<float>& weights) {
@@ -103,22 +108,6 @@ class IntensityGrid {
   }
 
  private:
-  // An uncoloured grid's view is the empty one (value == nullptr), which
-  // IntensityView::empty and the copy when an object grows rely on; no
-  // pointer into an empty vector (thrust forms it by dereferencing null),
-  // as in SparseTsdfVolume.
-  template <class Vec>
-  static auto* raw(Vec& v) {
-    return v.empty() ? nullptr : thrust::raw_pointer_cast(v.data());
-  }
-  template <class Vec>
-  std::vector<float> to_host(const Vec& v) const {
-    backend_.synchronize();
-    std::vector<float> out(v.size());
-    thrust::copy(v.begin(), v.end(), out.begin());
-    return out;
-  }
-
   Vec3i dims_{{0, 0, 0}};
   S voxel_size_ = S(0);
   B backend_{};

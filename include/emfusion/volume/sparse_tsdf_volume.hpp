@@ -324,21 +324,25 @@ class SparseTsdfVolume {
            2 * std::size_t(params_.block_capacity) * block_voxels * sizeof(Store);
   }
 
-  View view() { return make_view<View>(raw(sdf_), raw(weight_)); }
-  ConstView view() const { return make_view<ConstView>(raw(sdf_), raw(weight_)); }
+  View view() { return make_view<View>(raw_data(sdf_), raw_data(weight_)); }
+  ConstView view() const { return make_view<ConstView>(raw_data(sdf_), raw_data(weight_)); }
 
   /// Coordinates of the allocated blocks, in storage order (block b's voxels
   /// are b * 512 .. b * 512 + 511 of sdf_to_host()), synchronising first.
   std::vector<Vec3i> blocks_to_host() const {
-    const std::vector<Key> keys = copy_to_host(block_keys_, std::size_t(allocated_));
+    const std::vector<Key> keys = vector_to_host(backend_, block_keys_, std::size_t(allocated_));
     std::vector<Vec3i> out(keys.size());
     for (std::size_t b = 0; b < keys.size(); ++b) detail::sparse::unpack_key(keys[b], out[b][0], out[b][1], out[b][2]);
     return out;
   }
   /// SDF values and weights of the allocated blocks as host vectors, 512 per
   /// block in the order of blocks_to_host(), x fastest within a block.
-  std::vector<Store> sdf_to_host() const { return copy_to_host(sdf_, std::size_t(allocated_) * block_voxels); }
-  std::vector<Store> weight_to_host() const { return copy_to_host(weight_, std::size_t(allocated_) * block_voxels); }
+  std::vector<Store> sdf_to_host() const {
+    return vector_to_host(backend_, sdf_, std::size_t(allocated_) * block_voxels);
+  }
+  std::vector<Store> weight_to_host() const {
+    return vector_to_host(backend_, weight_, std::size_t(allocated_) * block_voxels);
+  }
 
   /// Replaces the contents with `blocks` (block coordinates: distinct, in
   /// the addressable range, at most the capacity), stored in that order, and
@@ -427,7 +431,7 @@ class SparseTsdfVolume {
 
   /// The test "is this key stored?" on the volume's backend.
   detail::sparse::IsStored stored() const {
-    return {raw(slot_keys_), raw(slot_blocks_), Key(slot_keys_.size() - 1), grid_view()};
+    return {raw_data(slot_keys_), raw_data(slot_blocks_), Key(slot_keys_.size() - 1), grid_view()};
   }
 
   /// Writes the indices of the allocated blocks b for which pred(b) holds
@@ -459,8 +463,8 @@ class SparseTsdfVolume {
     grow_storage(allocated_ + inserted);
     for_each_index(
         backend_, inserted,
-        detail::sparse::InsertBlock{thrust::raw_pointer_cast(keys.data()), raw(slot_keys_), raw(slot_blocks_),
-                                    Key(slot_keys_.size() - 1), raw(block_keys_), allocated_});
+        detail::sparse::InsertBlock{thrust::raw_pointer_cast(keys.data()), raw_data(slot_keys_), raw_data(slot_blocks_),
+                                    Key(slot_keys_.size() - 1), raw_data(block_keys_), allocated_});
     allocated_ += inserted;
     box_ = box_.merged(transform_reduce_index(backend_, inserted,
                                               detail::sparse::BoxOfKey{thrust::raw_pointer_cast(keys.data())},
@@ -486,7 +490,7 @@ class SparseTsdfVolume {
   detail::sparse::BlockGrid grid_view() const {
     detail::sparse::BlockGrid g;
     if (!grid_on_) return g;
-    g.cells = raw(grid_cells_);
+    g.cells = raw_data(grid_cells_);
     for (int a = 0; a < 3; ++a) g.lo[a] = grid_box_.lo[a], g.size[a] = grid_box_.hi[a] - grid_box_.lo[a] + 1;
     return g;
   }
@@ -524,7 +528,8 @@ class SparseTsdfVolume {
   }
   void scatter_to_grid(int first, int count) {
     if (count > 0)
-      for_each_index(backend_, count, detail::sparse::ScatterToGrid{raw(block_keys_), raw(grid_cells_), grid_view(), first});
+      for_each_index(backend_, count,
+                     detail::sparse::ScatterToGrid{raw_data(block_keys_), raw_data(grid_cells_), grid_view(), first});
   }
   /// Makes the voxel storage hold at least `blocks` blocks: doubling, capped
   /// at the capacity, reallocated to the exact size (a vector's own growth
@@ -550,25 +555,13 @@ class SparseTsdfVolume {
   V make_view(P* sdf, P* weight) const {
     V v;
     v.sdf = sdf, v.weight = weight;
-    v.slot_keys = raw(slot_keys_), v.slot_blocks = raw(slot_blocks_);
+    v.slot_keys = raw_data(slot_keys_), v.slot_blocks = raw_data(slot_blocks_);
     v.slot_mask = Key(slot_keys_.size() - 1);
-    v.block_keys = raw(block_keys_), v.blocks = allocated_;
+    v.block_keys = raw_data(block_keys_), v.blocks = allocated_;
     v.voxel_size = params_.voxel_size, v.truncation = params_.truncation;
     v.block_lo = block_min(), v.block_hi = block_max();
     v.grid = grid_view();
     return v;
-  }
-  // No pointer into an empty vector: thrust forms it by dereferencing null.
-  template <class Vec>
-  static auto* raw(Vec& v) {
-    return v.empty() ? nullptr : thrust::raw_pointer_cast(v.data());
-  }
-  template <class Vec>
-  std::vector<typename Vec::value_type> copy_to_host(const Vec& v, std::size_t count) const {
-    backend_.synchronize();
-    std::vector<typename Vec::value_type> out(count);
-    if (count > 0) thrust::copy(v.begin(), v.begin() + std::ptrdiff_t(count), out.begin());
-    return out;
   }
 
   SparseVolumeParams<S> params_;

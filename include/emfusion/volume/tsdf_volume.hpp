@@ -200,12 +200,12 @@ class TsdfVolume {
   /// Bytes of voxel storage.
   std::size_t memory_bytes() const { return 2 * sdf_.size() * sizeof(Store); }
 
-  View view() { return make_view<View>(raw(sdf_), raw(weight_)); }
-  ConstView view() const { return make_view<ConstView>(raw(sdf_), raw(weight_)); }
+  View view() { return make_view<View>(raw_data(sdf_), raw_data(weight_)); }
+  ConstView view() const { return make_view<ConstView>(raw_data(sdf_), raw_data(weight_)); }
 
   /// SDF values and weights as host vectors (x-fastest), synchronising first.
-  std::vector<Store> sdf_to_host() const { return to_host(sdf_); }
-  std::vector<Store> weight_to_host() const { return to_host(weight_); }
+  std::vector<Store> sdf_to_host() const { return vector_to_host(backend_, sdf_); }
+  std::vector<Store> weight_to_host() const { return vector_to_host(backend_, weight_); }
   /// Replaces every voxel with host values in the layout of sdf_to_host and
   /// weight_to_host: how a saved volume comes back (io/checkpoint.hpp).
   void assign_from_host(const std::vector<Store>& sdf, const std::vector<Store>& weight) {
@@ -238,17 +238,6 @@ class TsdfVolume {
     v.nx = geometry_.dims[0], v.ny = geometry_.dims[1], v.nz = geometry_.dims[2];
     v.voxel_size = geometry_.voxel_size, v.truncation = geometry_.truncation;
     return v;
-  }
-  template <class Vec>
-  static auto* raw(Vec& v) {
-    return thrust::raw_pointer_cast(v.data());
-  }
-  template <class Vec>
-  std::vector<Store> to_host(const Vec& v) const {
-    backend_.synchronize();
-    std::vector<Store> out(v.size());
-    thrust::copy(v.begin(), v.end(), out.begin());
-    return out;
   }
 
   VolumeGeometry<S> geometry_;
