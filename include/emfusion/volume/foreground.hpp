@@ -21,6 +21,7 @@
 #include "emfusion/core/image.hpp"
 #include "emfusion/core/parallel.hpp"
 #include "emfusion/core/se3.hpp"
+#include "emfusion/volume/detail/trilinear.hpp"
 #include "emfusion/volume/tsdf_volume.hpp"
 
 namespace emfusion {
@@ -51,16 +52,13 @@ struct ForegroundView {
   /// p_fg at a volume-frame point from trilinearly interpolated counts;
   /// 1/2 outside the grid of voxel centres.
   EMF_HD S probability(const Vec3<S>& p) const {
-    const S gx = p.x() / voxel_size - S(0.5), gy = p.y() / voxel_size - S(0.5), gz = p.z() / voxel_size - S(0.5);
-    if (!(gx >= S(0) && gy >= S(0) && gz >= S(0) && gx < S(nx - 1) && gy < S(ny - 1) && gz < S(nz - 1)))
-      return S(0.5);
-    const int x = int(gx), y = int(gy), z = int(gz);
-    const S fx = gx - S(x), fy = gy - S(y), fz = gz - S(z);
+    detail::trilinear::Cell<S> c;
+    if (!detail::trilinear::cell_in_grid(p, voxel_size, nx, ny, nz, c)) return S(0.5);
     S f = S(0), b = S(0);
     for (int k = 0; k < 8; ++k) {
       const int dx = k & 1, dy = (k >> 1) & 1, dz = (k >> 2) & 1;
-      const S w = (dx ? fx : S(1) - fx) * (dy ? fy : S(1) - fy) * (dz ? fz : S(1) - fz);
-      const std::int64_t i = (std::int64_t(z + dz) * ny + (y + dy)) * nx + (x + dx);
+      const S w = (dx ? c.fx : S(1) - c.fx) * (dy ? c.fy : S(1) - c.fy) * (dz ? c.fz : S(1) - c.fz);
+      const std::int64_t i = (std::int64_t(c.z + dz) * ny + (c.y + dy)) * nx + (c.x + dx);
       f += w * S(fg[i]);
       b += w * S(bg[i]);
     }

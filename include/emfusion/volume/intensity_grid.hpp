@@ -45,18 +45,16 @@ struct IntensityView {
   /// metre, of the trilinear interpolant); false outside the grid of voxel
   /// centres or where one of the eight voxels around p is not coloured.
   EMF_HD bool sample_with_gradient(const Vec3<S>& p, S& out, Vec3<S>& gradient) const {
-    const S gx = p.x() / voxel_size - S(0.5), gy = p.y() / voxel_size - S(0.5), gz = p.z() / voxel_size - S(0.5);
-    if (!(gx >= S(0) && gy >= S(0) && gz >= S(0) && gx < S(nx - 1) && gy < S(ny - 1) && gz < S(nz - 1))) return false;
-    const int x = int(gx), y = int(gy), z = int(gz);
-    const S fx = gx - S(x), fy = gy - S(y), fz = gz - S(z);
+    detail::trilinear::Cell<S> c;
+    if (!detail::trilinear::cell_in_grid(p, voxel_size, nx, ny, nz, c)) return false;
     S v[8];
     for (int k = 0; k < 8; ++k) {
-      const std::int64_t i = index(x + (k & 1), y + ((k >> 1) & 1), z + ((k >> 2) & 1));
+      const std::int64_t i = index(c.x + (k & 1), c.y + ((k >> 1) & 1), c.z + ((k >> 2) & 1));
       if (!(weight[i] > 0.0f)) return false;
       v[k] = S(value[i]);
     }
-    out = detail::trilinear::interpolate(v, fx, fy, fz);
-    gradient = detail::trilinear::gradient(v, fx, fy, fz, voxel_size);
+    out = detail::trilinear::interpolate(v, c.fx, c.fy, c.fz);
+    gradient = detail::trilinear::gradient(v, c.fx, c.fy, c.fz, voxel_size);
     return true;
   }
 };

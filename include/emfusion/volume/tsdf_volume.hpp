@@ -119,18 +119,9 @@ struct TsdfView {
   }
 
  private:
-  struct Corner {
-    int x, y, z;
-    S fx, fy, fz;
-  };
+  using Corner = detail::trilinear::Cell<S>;
   EMF_HD bool corner(const Vec3<S>& p, Corner& c) const {
-    const S gx = p.x() / voxel_size - S(0.5), gy = p.y() / voxel_size - S(0.5), gz = p.z() / voxel_size - S(0.5);
-    // Written so that NaN coordinates fail the test.
-    if (!(gx >= S(0) && gy >= S(0) && gz >= S(0) && gx < S(nx - 1) && gy < S(ny - 1) && gz < S(nz - 1)))
-      return false;
-    c.x = int(gx), c.y = int(gy), c.z = int(gz);
-    c.fx = gx - S(c.x), c.fy = gy - S(c.y), c.fz = gz - S(c.z);
-    return true;
+    return detail::trilinear::cell_in_grid(p, voxel_size, nx, ny, nz, c);
   }
   EMF_HD bool load(const Corner& c, S* v, S* w) const {
     for (int k = 0; k < 8; ++k) {

@@ -16,25 +16,15 @@
 
 namespace emfusion::detail::sparse {
 
-/// The lower corner of the eight voxel centres around a point, and the
-/// point's fractions between them.
 template <class S>
-struct Corner {
-  int x, y, z;
-  S fx, fy, fz;
-};
+using Corner = trilinear::Cell<S>;
 
 /// Corner of volume-frame point p; false outside the addressable range, with
 /// a voxel to spare (and for NaN).
 template <class S>
 EMF_HD EMF_INLINE_ON_HOST inline bool corner_of(const Vec3<S>& p, S voxel_size, Corner<S>& c) {
-  const S gx = p.x() / voxel_size - S(0.5), gy = p.y() / voxel_size - S(0.5), gz = p.z() / voxel_size - S(0.5);
-  // Written so that NaN coordinates fail the test.
   const S l = S(voxel_limit - 2);
-  if (!(gx >= -l && gy >= -l && gz >= -l && gx < l && gy < l && gz < l)) return false;
-  c.x = int(std::floor(gx)), c.y = int(std::floor(gy)), c.z = int(std::floor(gz));
-  c.fx = gx - S(c.x), c.fy = gy - S(c.y), c.fz = gz - S(c.z);
-  return true;
+  return trilinear::cell_of(p, voxel_size, vec3(-l, -l, -l), vec3(l, l, l), c);
 }
 
 /// The samples of a sparse volume's voxels (`sdf`, `weight`, blocks of

@@ -2,7 +2,8 @@
 // dense TsdfView, the sparse SparseTsdfView, volume/nearby_samples.hpp's
 // cached sampler): trilinear interpolation of a cell's eight voxels and its
 // exact gradient, and the two finite-difference gradients built on a
-// sampler's own samples. One copy, so that the samplers agree bit for bit.
+// sampler's own samples, and the cell of voxel centres around a point. One
+// copy, so that the samplers agree bit for bit.
 // Corner order everywhere: index bit 1 -> +x, 2 -> +y, 4 -> +z.
 #pragma once
 
@@ -10,6 +11,41 @@
 #include "emfusion/core/math.hpp"
 
 namespace emfusion::detail::trilinear {
+
+/// The cell of voxel centres around a volume-frame point (voxel i's centre
+/// at (i + 1/2) voxel_size): its lower corner voxel and the point's
+/// fractions towards the upper one.
+template <class S>
+struct Cell {
+  int x, y, z;
+  S fx, fy, fz;
+};
+
+/// The cell around volume-frame point p when p, in voxel units from the
+/// first centre, lies in [lo, hi) on every axis; false outside (and for NaN).
+template <class S>
+EMF_HD EMF_INLINE_ON_HOST inline bool cell_of(const Vec3<S>& p, S voxel_size, const Vec3<S>& lo, const Vec3<S>& hi,
+                                              Cell<S>& c) {
+  const S gx = p.x() / voxel_size - S(0.5), gy = p.y() / voxel_size - S(0.5), gz = p.z() / voxel_size - S(0.5);
+  // Written so that NaN coordinates fail the test.
+  if (!(gx >= lo.x() && gy >= lo.y() && gz >= lo.z() && gx < hi.x() && gy < hi.y() && gz < hi.z())) return false;
+  // floor without a library call (the samplers' inner loop): truncation,
+  // one less below zero where g is not whole.
+  const auto lower = [](S g) {
+    const int i = int(g);
+    return S(i) > g ? i - 1 : i;
+  };
+  c.x = lower(gx), c.y = lower(gy), c.z = lower(gz);
+  c.fx = gx - S(c.x), c.fy = gy - S(c.y), c.fz = gz - S(c.z);
+  return true;
+}
+
+/// The cell around p in a dense grid of nx x ny x nz voxels: false where p
+/// is outside the grid of voxel centres (the eight voxels must exist).
+template <class S>
+EMF_HD EMF_INLINE_ON_HOST inline bool cell_in_grid(const Vec3<S>& p, S voxel_size, int nx, int ny, int nz, Cell<S>& c) {
+  return cell_of(p, voxel_size, Vec3<S>::zero(), vec3(S(nx - 1), S(ny - 1), S(nz - 1)), c);
+}
 
 /// The trilinear interpolant of the eight corner values at fractions (fx, fy, fz).
 template <class S>
