@@ -210,6 +210,66 @@ TEMPLATE_LIST_TEST_CASE("Integration weights: per-pixel weights and the W_max ca
   CHECK(double(sdf[view.index(16, 16, zi)]) == test::Approx(1.0 - centre).margin(1e-3));
 }
 
+TEMPLATE_LIST_TEST_CASE("A surface in front of points another model owns is forgotten with unowned_free_from",
+                        "[volume]", emfusion::test::AllConfigs) {
+  using S = typename TestType::Scalar;
+  using B = typename TestType::Backend;
+  // A wall at 1 m fused 20 times (a trace of an object that stood still in
+  // the background), then the object seen 0.12 m further back (within the
+  // truncation of 0.2 m) on pixels the volume's model does not own (q = 0).
+  const PinholeCamera<S> camera{S(100), S(100), S(31.5), S(23.5), 64, 48};
+  VolumeGeometry<S> g;
+  g.dims = Vec3i{{32, 32, 64}};
+  g.voxel_size = S(0.02);
+  g.T_world_volume = SE3<S>::translation(vec3(S(-0.32), S(-0.32), S(0.4)));
+  const B backend{};
+  const Image<S, B> wall(camera.width, camera.height, S(1.0), backend);
+  const Image<S, B> behind(camera.width, camera.height, S(1.12), backend);
+  const Image<S, B> owned(camera.width, camera.height, S(1), backend);
+  const Image<S, B> not_owned(camera.width, camera.height, S(0), backend);
+  // The depth of the first sign change along the centre column (the surface
+  // a ray cast would meet), or 0 where there is none.
+  const auto surface_depth = [](const TsdfVolume<S, B>& volume) {
+    const auto sdf = volume.sdf_to_host();
+    const auto weight = volume.weight_to_host();
+    const auto view = volume.view();
+    for (int z = 0; z + 1 < view.nz; ++z) {
+      const auto a = view.index(16, 16, z), b = view.index(16, 16, z + 1);
+      if (weight[a] > 0 && weight[b] > 0 && sdf[a] > 0 && sdf[b] <= 0) return 0.4 + (z + 1) * 0.02;
+    }
+    return 0.0;
+  };
+  const auto fuse = [&](S unowned_free_from, int frames_behind) {
+    IntegrationParams<S> params;
+    params.unowned_free_from = unowned_free_from;
+    TsdfVolume<S, B> volume(g, backend);
+    for (int k = 0; k < 20; ++k) integrate(volume, wall, camera, SE3<S>::identity(), &owned, params);
+    for (int k = 0; k < frames_behind; ++k) integrate(volume, behind, camera, SE3<S>::identity(), &not_owned, params);
+    return volume;
+  };
+  // The paper's update: rays ending on the other model within the truncation
+  // leave the wall where it was, however many.
+  CHECK(surface_depth(fuse(S(0), 10)) == test::Approx(1.0).margin(0.021));
+  // Free from 0.3 truncations (0.06 m) in front of the points: after one
+  // frame the surface left is within that and a voxel of them.
+  CHECK(surface_depth(fuse(S(0.3), 1)) >= 1.12 - 0.06 - 0.02);
+
+  // On pixels the model owns (q = 1) the option changes nothing.
+  IntegrationParams<S> on;
+  on.unowned_free_from = S(0.3);
+  TsdfVolume<S, B> a(g, backend), b(g, backend);
+  for (const auto* depth : {&wall, &behind}) {
+    integrate(a, *depth, camera, SE3<S>::identity(), &owned);
+    integrate(b, *depth, camera, SE3<S>::identity(), &owned, on);
+  }
+  CHECK(a.sdf_to_host() == b.sdf_to_host());
+  CHECK(a.weight_to_host() == b.weight_to_host());
+
+  on.unowned_free_from = S(1.5);
+  CHECK_THROWS_WITH(integrate(a, wall, camera, SE3<S>::identity(), &owned, on),
+                    EMF_CONTAINS("unowned_free_from must be in [0, 1]"));
+}
+
 TEMPLATE_LIST_TEST_CASE("Volume operations reject bad arguments with clear errors", "[volume]",
                         emfusion::test::AllConfigs) {
   using S = typename TestType::Scalar;

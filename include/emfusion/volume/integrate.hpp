@@ -8,6 +8,11 @@
 // weight (the association likelihood in EM-Fusion; 1 without a weight image).
 // Voxels in free space (d >= truncation) are updated with weight 1 whatever
 // q(u) is, so that a surface that moved away is carved out of every model.
+// With `unowned_free_from` > 0, a voxel in front of the pixel's point by at
+// least that fraction of the truncation is free space for the share 1 - q(u)
+// of the pixel the model does not own, and forgets that share of what it
+// held: a trace of an object in the background (fused while the object
+// stood still) goes as soon as the rays end on the object behind it.
 //
 // Refinements of the plain projective update, all off by default and on in
 // IntegrationParams::refined() (docs/decisions.md has the measurements):
@@ -57,6 +62,14 @@ struct IntegrationParams {
   /// Depth of the band updated behind a surface, as a fraction of the
   /// truncation (1 = the symmetric band of the paper).
   S behind_band = S(1);
+  /// Voxels this fraction of the truncation or more in front of a pixel's
+  /// point are free space for the share 1 - q(u) of the pixel that the model
+  /// does not own: what they held keeps the weight W(v) q(u) (the paper's
+  /// "reweigh the accumulated weight W(v) with w_u", in front of the points
+  /// only) and, within the truncation, +truncation takes the weight
+  /// (1 - q(u)) free_space_weight beside q(u)'s update. 0 = off (the paper).
+  /// Needs a weight image.
+  S unowned_free_from = S(0);
 
   /// The refinements for accurate geometry from clean depth (synthetic data,
   /// multi-view scans): within one voxel of the true surface where the
@@ -140,20 +153,30 @@ struct VoxelUpdate {
     const S c = incidence.empty() ? S(1) : incidence(u, v);
     if (params.point_to_plane) sdf *= c;
     if (sdf < -behind) return;
-    S w = weights.empty() ? S(1) : weights(u, v);
+    const S q = weights.empty() ? S(1) : weights(u, v);
+    // Weights of the measured distance, of +truncation and of what the voxel held.
+    S w = q, w_free = S(0), keep = S(1);
+    // Beside a silhouette a voxel may belong to the nearer surface.
+    const auto free_beside = [&](S from) {
+      return near_depth.empty() || (near_depth(u, v) - p.z()) * ray_scale >= from;
+    };
     if (sdf >= trunc) {
-      // Beside a silhouette the voxel may belong to the nearer surface.
-      if (!near_depth.empty() && (near_depth(u, v) - p.z()) * ray_scale < trunc) return;
+      if (!free_beside(trunc)) return;
       w = params.free_space_weight;
     } else {
       if (params.behind_surface_falloff && sdf < S(0)) w *= S(1) + sdf / behind;
       if (params.weight_by_incidence) w *= c;
     }
-    if (!(w > S(0))) return;
+    const S from = params.unowned_free_from * trunc;
+    if (from > S(0) && sdf >= from && q < S(1) && free_beside(from)) {
+      keep = q;
+      if (sdf < trunc) w_free = params.free_space_weight * (S(1) - q);
+    }
+    if (!(w + w_free > S(0))) return;
     const S tsdf = sdf < trunc ? sdf : trunc;
-    const S w_old = S(voxel_weight);
-    const S w_sum = w_old + w;
-    voxel_sdf = Store((w_old * S(voxel_sdf) + w * tsdf) / w_sum);
+    const S w_old = keep * S(voxel_weight);
+    const S w_sum = w_old + w + w_free;
+    voxel_sdf = Store((w_old * S(voxel_sdf) + w * tsdf + w_free * trunc) / w_sum);
     voxel_weight = Store(w_sum < params.max_weight ? w_sum : params.max_weight);
   }
 };
@@ -401,6 +424,8 @@ VoxelUpdate<S> prepare_voxel_update(const Image<S, B>& depth, const PinholeCamer
                   "silhouette_guard must not be negative, got " + std::to_string(double(params.silhouette_guard)));
   detail::require(params.max_weight > S(0), where,
                   "max_weight must be positive, got " + std::to_string(double(params.max_weight)));
+  detail::require(params.unowned_free_from >= S(0) && params.unowned_free_from <= S(1), where,
+                  "unowned_free_from must be in [0, 1], got " + std::to_string(double(params.unowned_free_from)));
   const auto sized = [&](Image<S, B>& image) -> Image<S, B>& {
     if (!image.same_size(depth.width(), depth.height()))
       image = Image<S, B>(depth.width(), depth.height(), S(0), backend);
