@@ -63,6 +63,22 @@ SdfErrors compare_near_surface(const TsdfVolume<S, B>& volume, const sim::Scene<
   return e;
 }
 
+/// A camera looking along the z axis of a 32 x 32 x 64 grid of 2 cm voxels
+/// that starts 0.4 m in front of it: fronto-parallel walls at constant depth
+/// fill its view.
+template <class S>
+PinholeCamera<S> wall_camera() {
+  return {S(100), S(100), S(31.5), S(23.5), 64, 48};
+}
+template <class S>
+VolumeGeometry<S> wall_geometry() {
+  VolumeGeometry<S> g;
+  g.dims = Vec3i{{32, 32, 64}};
+  g.voxel_size = S(0.02);
+  g.T_world_volume = SE3<S>::translation(vec3(S(-0.32), S(-0.32), S(0.4)));
+  return g;
+}
+
 }  // namespace
 
 TEMPLATE_LIST_TEST_CASE("Fused sphere and box match their analytic SDF near the surface", "[volume]",
@@ -174,12 +190,8 @@ TEMPLATE_LIST_TEST_CASE("Integration weights: per-pixel weights and the W_max ca
   using S = typename TestType::Scalar;
   using B = typename TestType::Backend;
   // A fronto-parallel wall at 1 m; the camera looks along the volume's z axis.
-  const PinholeCamera<S> camera{S(100), S(100), S(31.5), S(23.5), 64, 48};
-  VolumeGeometry<S> g;
-  g.dims = Vec3i{{32, 32, 64}};
-  g.voxel_size = S(0.02);
-  g.T_world_volume = SE3<S>::translation(vec3(S(-0.32), S(-0.32), S(0.4)));
-  TsdfVolume<S, B> volume(g);
+  const PinholeCamera<S> camera = wall_camera<S>();
+  TsdfVolume<S, B> volume(wall_geometry<S>());
   const Image<S, B> depth(camera.width, camera.height, S(1.0), volume.backend());
   Image<S, B> weights(camera.width, camera.height, S(0.25), volume.backend());
 
@@ -217,11 +229,8 @@ TEMPLATE_LIST_TEST_CASE("A surface in front of points another model owns is forg
   // A wall at 1 m fused 20 times (a trace of an object that stood still in
   // the background), then the object seen 0.12 m further back (within the
   // truncation of 0.2 m) on pixels the volume's model does not own (q = 0).
-  const PinholeCamera<S> camera{S(100), S(100), S(31.5), S(23.5), 64, 48};
-  VolumeGeometry<S> g;
-  g.dims = Vec3i{{32, 32, 64}};
-  g.voxel_size = S(0.02);
-  g.T_world_volume = SE3<S>::translation(vec3(S(-0.32), S(-0.32), S(0.4)));
+  const PinholeCamera<S> camera = wall_camera<S>();
+  const VolumeGeometry<S> g = wall_geometry<S>();
   const B backend{};
   const Image<S, B> wall(camera.width, camera.height, S(1.0), backend);
   const Image<S, B> behind(camera.width, camera.height, S(1.12), backend);
