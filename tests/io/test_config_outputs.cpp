@@ -67,6 +67,10 @@ TEST_CASE("Bad config files name the file, the line and the problem", "[io]") {
   e = bad("object_voxels = 4\n");  // read fine, rejected by validation
   CHECK(contains(e, "b.conf"));
   CHECK(contains(e, "object_voxels"));
+  p = SystemParams<float>{};  // object_voxels = 4 stayed in p
+  e = bad("background_unowned_free_from = 2\n");
+  CHECK(contains(e, "b.conf"));
+  CHECK(contains(e, "background_unowned_free_from must be in [0, 1]"));
   CHECK(contains(error_of([&] { read_config(dir.file("missing.conf"), p); }), "missing.conf"));
   CHECK(contains(error_of([&] { apply_override(p, "alpha"); }), "not of the form key=value"));
 }

@@ -424,9 +424,11 @@ struct SystemParams {
     detail::require(merge_min_inliers >= 0 && merge_min_inliers <= 1, w, "merge_min_inliers must be in [0, 1]");
     detail::require(background_integration.max_weight > S(0) && object_integration.max_weight > S(0), w,
                     "max_weight must be positive");
-    for (const auto* i : {&background_integration, &object_integration})
-      detail::require(i->unowned_free_from >= S(0) && i->unowned_free_from <= S(1), w,
-                      "unowned_free_from must be in [0, 1]");
+    const auto in_unit = [](S v) { return v >= S(0) && v <= S(1); };
+    detail::require(in_unit(background_integration.unowned_free_from), w,
+                    "background_unowned_free_from must be in [0, 1]");
+    detail::require(in_unit(object_integration.unowned_free_from), w,
+                    "object_integration.unowned_free_from must be in [0, 1]");
   }
 };
 
