@@ -463,11 +463,11 @@ class SparseTsdfVolume {
     grow_storage(allocated_ + inserted);
     for_each_index(
         backend_, inserted,
-        detail::sparse::InsertBlock{thrust::raw_pointer_cast(keys.data()), raw_data(slot_keys_), raw_data(slot_blocks_),
+        detail::sparse::InsertBlock{raw_data(keys), raw_data(slot_keys_), raw_data(slot_blocks_),
                                     Key(slot_keys_.size() - 1), raw_data(block_keys_), allocated_});
     allocated_ += inserted;
     box_ = box_.merged(transform_reduce_index(backend_, inserted,
-                                              detail::sparse::BoxOfKey{thrust::raw_pointer_cast(keys.data())},
+                                              detail::sparse::BoxOfKey{raw_data(keys)},
                                               detail::sparse::BlockBox{}, detail::sparse::MergeBoxes{}));
     update_grid(allocated_ - inserted, inserted);
     return result;
@@ -619,7 +619,7 @@ BlockAllocation allocate_blocks(SparseTsdfVolume<S, B, Store>& volume, const Ima
                                      camera,         volume.pose().inverse() * T_world_camera,
                                      trunc,          block,
                                      samples,        volume.stored(),
-                                     thrust::raw_pointer_cast(ws.keys.data()), thrust::raw_pointer_cast(ws.counter.data())};
+                                     raw_data(ws.keys), raw_data(ws.counter)};
   std::size_t count = 0;
   if constexpr (B::is_device) {
     thrust::fill(volume.backend().policy(), ws.counter.begin(), ws.counter.end(), 0ull);
@@ -681,7 +681,7 @@ SparseIntegration integrate(SparseTsdfVolume<S, B, Store>& volume, const Image<S
   using Column =
       detail::sparse::IntegrateBlockColumn<S, typename SparseTsdfVolume<S, B, Store>::View, detail::VoxelUpdate<S>>;
   for_each_index(backend, result.blocks_in_view * std::int64_t(detail::sparse::block_side * detail::sparse::block_side),
-                 Column{view, thrust::raw_pointer_cast(ws.blocks.data()), update, T_camera_volume});
+                 Column{view, raw_data(ws.blocks), update, T_camera_volume});
   return result;
 }
 
