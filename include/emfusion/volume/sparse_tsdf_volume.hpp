@@ -461,13 +461,11 @@ class SparseTsdfVolume {
     result.refused = fresh - inserted;
     if (inserted == 0) return result;
     grow_storage(allocated_ + inserted);
-    for_each_index(
-        backend_, inserted,
-        detail::sparse::InsertBlock{raw_data(keys), raw_data(slot_keys_), raw_data(slot_blocks_),
-                                    Key(slot_keys_.size() - 1), raw_data(block_keys_), allocated_});
+    for_each_index(backend_, inserted,
+                   detail::sparse::InsertBlock{raw_data(keys), raw_data(slot_keys_), raw_data(slot_blocks_),
+                                               Key(slot_keys_.size() - 1), raw_data(block_keys_), allocated_});
     allocated_ += inserted;
-    box_ = box_.merged(transform_reduce_index(backend_, inserted,
-                                              detail::sparse::BoxOfKey{raw_data(keys)},
+    box_ = box_.merged(transform_reduce_index(backend_, inserted, detail::sparse::BoxOfKey{raw_data(keys)},
                                               detail::sparse::BlockBox{}, detail::sparse::MergeBoxes{}));
     update_grid(allocated_ - inserted, inserted);
     return result;
@@ -615,11 +613,16 @@ BlockAllocation allocate_blocks(SparseTsdfVolume<S, B, Store>& volume, const Ima
   const std::size_t slots = std::size_t(depth.size()) * std::size_t(samples);
   if (ws.keys.size() < slots) ws.keys.resize(slots);
   if (ws.counter.size() < 1) ws.counter.resize(1);
-  detail::sparse::BandBlockKeys<S> f{depth.view(),   weights ? weights->view() : ImageView<const S>{},
-                                     camera,         volume.pose().inverse() * T_world_camera,
-                                     trunc,          block,
-                                     samples,        volume.stored(),
-                                     raw_data(ws.keys), raw_data(ws.counter)};
+  detail::sparse::BandBlockKeys<S> f{depth.view(),
+                                     weights ? weights->view() : ImageView<const S>{},
+                                     camera,
+                                     volume.pose().inverse() * T_world_camera,
+                                     trunc,
+                                     block,
+                                     samples,
+                                     volume.stored(),
+                                     raw_data(ws.keys),
+                                     raw_data(ws.counter)};
   std::size_t count = 0;
   if constexpr (B::is_device) {
     thrust::fill(volume.backend().policy(), ws.counter.begin(), ws.counter.end(), 0ull);
