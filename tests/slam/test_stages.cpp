@@ -14,6 +14,7 @@
 // likelihood, a norm and a solver defined here, as a user would, and with
 // colour in its objects' models (object_colour_weight).
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdint>
 #include <random>
@@ -719,6 +720,59 @@ TEMPLATE_LIST_TEST_CASE("Stages alone: a point in space the background never saw
     CHECK(box_marked > 0.9 * box);  // in front of the wall the background saw: unexplained
   else
     CHECK(box_marked < 0.05 * box);  // nothing seen behind it: new background
+}
+
+TEMPLATE_LIST_TEST_CASE(
+    "Stages alone: with background_unowned_free_from the background forgets an object's trace "
+    "where the object is drawn",
+    "[slam]", emfusion::test::HeavyConfigs) {
+  using S = typename TestType::Scalar;
+  using B = typename TestType::Backend;
+  // The first frame fused the box into the background too (as the paper's
+  // still objects are, sec. 3.6). The box then moves 8 cm away from the
+  // camera, its object with it: the E-step gives the box's pixels to the
+  // object, rendering draws it there, and the background's surface where
+  // the box stood is a trace in front of the frame's points.
+  const SE3<S> T_moved = SE3<S>::translation(vec3(S(0), S(0), S(0.08)));
+  // The background's SDF on the optical axis where the box's face was, and
+  // on the wall away from the box, after one frame of the moved box.
+  const auto after_move = [&](bool drawn) {
+    OneFrameMap<S, B> m;
+    REQUIRE(m.map.objects.size() == 1);
+    const int centre = (m.s.camera.height / 2) * m.s.camera.width + m.s.camera.width / 2;
+    const S face = m.depth.to_host()[std::size_t(centre)];
+    m.s.scene.shapes[1] = WallAndBox<S>::box(T_moved);
+    m.map.objects[0]->set_pose(T_moved * m.map.objects[0]->pose());
+    m.s.params.background_integration.unowned_free_from = S(0.2);
+    PaperLikelihood<S> likelihood;
+    likelihood.params = m.s.params.likelihood;
+    preprocess(m.s.template depth<B>(SE3<S>::identity()), m.s.camera, m.s.params, m.frame);
+    associate(m.map, m.frame, likelihood, m.s.params);
+    render_models(m.map, m.frame, m.s.camera, m.s.params, m.workspace);
+    CHECK(double(m.frame.object_depth.to_host()[std::size_t(centre)] - face) > 0.06);  // drawn where it went
+    if (!drawn) m.frame.object_depth.fill(S(0));
+    integrate_models(m.map, m.frame, m.s.camera, m.s.params, {}, false);
+    const Vec3<S> old_face = m.s.camera.back_project(S(m.s.camera.width / 2), S(m.s.camera.height / 2), face);
+    std::array<S, 2> sdf{S(-1), S(-1)};
+    m.map.background.visit([&](const auto& volume) {
+      const auto background = volume.template to<Host>();
+      const auto at = [&](const Vec3<S>& p, S& out) {
+        CHECK(background.view().sample(background.pose().inverse() * p, out));
+      };
+      at(old_face, sdf[0]);
+      at(vec3(S(0.5), S(0.3), S(2)), sdf[1]);
+    });
+    return sdf;
+  };
+  const std::array<S, 2> forgotten = after_move(true), kept = after_move(false);
+  INFO("SDF at the box's old face: " << forgotten[0] << " drawn, " << kept[0] << " not drawn");
+  // Drawn: the old face is free space now (the truncation is 0.25 m). Not
+  // drawn (the same frame without the rendered object depth): the paper's
+  // update, the old surface stays within a voxel.
+  CHECK(double(forgotten[0]) > 0.05);
+  CHECK(std::abs(double(kept[0])) < 0.025);
+  // Where no object is drawn the rule does nothing either way.
+  CHECK(forgotten[1] == kept[1]);
 }
 
 namespace {

@@ -236,24 +236,25 @@ TEMPLATE_LIST_TEST_CASE("A surface in front of points another model owns is forg
   const Image<S, B> behind(camera.width, camera.height, S(1.12), backend);
   const Image<S, B> owned(camera.width, camera.height, S(1), backend);
   const Image<S, B> not_owned(camera.width, camera.height, S(0), backend);
-  // The depth of the first sign change along the centre column (the surface
-  // a ray cast would meet), or 0 where there is none.
-  const auto surface_depth = [](const TsdfVolume<S, B>& volume) {
+  // The depth of the first sign change along column (x, 16) (the surface a
+  // ray cast would meet; x = 16 is the centre), or 0 where there is none.
+  const auto surface_depth = [](const TsdfVolume<S, B>& volume, int x = 16) {
     const auto sdf = volume.sdf_to_host();
     const auto weight = volume.weight_to_host();
     const auto view = volume.view();
     for (int z = 0; z + 1 < view.nz; ++z) {
-      const auto a = view.index(16, 16, z), b = view.index(16, 16, z + 1);
+      const auto a = view.index(x, 16, z), b = view.index(x, 16, z + 1);
       if (weight[a] > 0 && weight[b] > 0 && sdf[a] > 0 && sdf[b] <= 0) return 0.4 + (z + 1) * 0.02;
     }
     return 0.0;
   };
-  const auto fuse = [&](S unowned_free_from, int frames_behind) {
+  const auto fuse = [&](S unowned_free_from, int frames_behind, const Image<S, B>* others_drawn = nullptr) {
     IntegrationParams<S> params;
     params.unowned_free_from = unowned_free_from;
     TsdfVolume<S, B> volume(g, backend);
     for (int k = 0; k < 20; ++k) integrate(volume, wall, camera, SE3<S>::identity(), &owned, params);
-    for (int k = 0; k < frames_behind; ++k) integrate(volume, behind, camera, SE3<S>::identity(), &not_owned, params);
+    for (int k = 0; k < frames_behind; ++k)
+      integrate(volume, behind, camera, SE3<S>::identity(), IntegrationWeights<S, B>{&not_owned, others_drawn}, params);
     return volume;
   };
   // The paper's update: rays ending on the other model within the truncation
@@ -262,6 +263,24 @@ TEMPLATE_LIST_TEST_CASE("A surface in front of points another model owns is forg
   // Free from 0.3 truncations (0.06 m) in front of the points: after one
   // frame the surface left is within that and a voxel of them.
   CHECK(surface_depth(fuse(S(0.3), 1)) >= 1.12 - 0.06 - 0.02);
+
+  // Confined to where another model is drawn: an object drawn on the left
+  // half of the image only (u < 32; column x = 8 projects to u = 16.5, x =
+  // 24 to u = 48.5) frees the wall there and leaves it on the right.
+  std::vector<S> left(std::size_t(camera.width * camera.height), S(0));
+  for (int v = 0; v < camera.height; ++v)
+    for (int u = 0; u < camera.width / 2; ++u) left[std::size_t(v * camera.width + u)] = S(1.12);
+  const auto drawn_left = Image<S, B>::from_host(camera.width, camera.height, left, backend);
+  const TsdfVolume<S, B> gated = fuse(S(0.3), 1, &drawn_left);
+  CHECK(surface_depth(gated, 8) >= 1.12 - 0.06 - 0.02);
+  CHECK(surface_depth(gated, 24) == test::Approx(1.0).margin(0.021));
+  // Nothing drawn: the paper's update bit for bit.
+  const Image<S, B> none_drawn(camera.width, camera.height, S(0), backend);
+  CHECK(fuse(S(0.3), 3, &none_drawn).sdf_to_host() == fuse(S(0), 3).sdf_to_host());
+  const Image<S, B> small(8, 8, S(1), backend);
+  TsdfVolume<S, B> volume(g, backend);
+  CHECK_THROWS_WITH(integrate(volume, behind, camera, SE3<S>::identity(), IntegrationWeights<S, B>{&not_owned, &small}),
+                    EMF_CONTAINS("others_drawn image is 8x8"));
 
   // On pixels the model owns (q = 1) the option changes nothing.
   IntegrationParams<S> on;

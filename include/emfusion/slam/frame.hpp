@@ -1,8 +1,9 @@
 // The images of one frame that the stages hand on to each other: the
 // received depth made safe, its filtered version and camera-frame points
 // (preprocessing), the association images (E-step), the rendered
-// segmentation (rendering) and what tracking did with every object. Keep one
-// Frame across frames: its images are reused while the camera's size stays.
+// segmentation and object depth (rendering) and what tracking did with
+// every object. Keep one Frame across frames: its images are reused while
+// the camera's size stays.
 #pragma once
 
 #include <vector>
@@ -26,6 +27,9 @@ struct Frame {
   Associations<S, B> associations;
   /// Per pixel: -1 nothing drawn and no depth, 0 background, k + 1 Map::objects[k].
   Image<int, B> segmentation;
+  /// Per pixel: the depth of the nearest object surface drawn (rendering),
+  /// 0 where no object is, whether or not the background hides it.
+  Image<S, B> object_depth;
   /// What tracking did with Map::objects[k] this frame (not_tracked for
   /// objects created after tracking).
   std::vector<PoseTrack> object_tracks;

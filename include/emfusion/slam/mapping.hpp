@@ -38,7 +38,10 @@ struct ObjectIntegrationWorkspace {
 /// model k with weights frame.associations.image(k), the last fresh.size()
 /// objects (added by detection handling) with their first-view weights.
 /// `first`: the frame that starts the map, which has no association images;
-/// the background then takes every pixel with weight 1.
+/// the background then takes every pixel with weight 1. The background
+/// forgets traces (params.background_integration.unowned_free_from) only
+/// where render_models drew an object (frame.object_depth; everywhere if
+/// the frame has none).
 /// `background_weights` (optional) replaces the background's association
 /// image as its weights (hold_unexplained, unexplained.hpp). The workspaces
 /// (optional) keep the buffers of a dense and of a sparse background, and
@@ -55,13 +58,14 @@ void integrate_models(Map<S, B>& map, const Frame<S, B>& frame, const PinholeCam
                       ObjectIntegrationWorkspace<S, B>* objects_workspace = nullptr) {
   const std::size_t old_objects = map.objects.size() - fresh.size();
   if (!background_weights && !first) background_weights = &frame.associations.image(0);
+  const bool drawn = frame.object_depth.same_size(frame.depth.width(), frame.depth.height());
+  const IntegrationWeights<S, B> weights{background_weights, drawn ? &frame.object_depth : nullptr};
   map.background.visit([&](auto& background) {
     if constexpr (requires { background.allocated_blocks(); })
-      integrate(background, frame.depth, camera, map.T_world_camera, background_weights,
-                params.background_integration, sparse_workspace);
+      integrate(background, frame.depth, camera, map.T_world_camera, weights, params.background_integration,
+                sparse_workspace);
     else
-      integrate(background, frame.depth, camera, map.T_world_camera, background_weights,
-                params.background_integration, workspace);
+      integrate(background, frame.depth, camera, map.T_world_camera, weights, params.background_integration, workspace);
   });
   const std::size_t n = map.objects.size();
   const B& backend = frame.depth.backend();

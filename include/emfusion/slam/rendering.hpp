@@ -24,7 +24,6 @@ namespace emfusion {
 /// Images rendering keeps between frames.
 template <class S, Backend B>
 struct RenderWorkspace {
-  Image<S, B> object_depth;        ///< the nearest object surface per pixel
   Image<S, B> background_ray_end;  ///< where the background's rays stop
   RaycastResult<S, B> background;  ///< the background's rendering, where objects were drawn
   Image<int, B> seen;              ///< seen_segmentation's labels
@@ -112,9 +111,10 @@ struct SeenLabel {
 
 }  // namespace detail::rendering
 
-/// Renders every live object (ObjectModel::rendering) and the segmentation
-/// of the frame (frame.segmentation) at map.T_world_camera. Person objects
-/// that params.ignores are not drawn.
+/// Renders every live object (ObjectModel::rendering), the segmentation of
+/// the frame (frame.segmentation) and the nearest object surface per pixel
+/// (frame.object_depth) at map.T_world_camera. Person objects that
+/// params.ignores are not drawn.
 template <class S, Backend B>
 void render_models(Map<S, B>& map, Frame<S, B>& frame, const PinholeCamera<S>& camera, const SystemParams<S>& params,
                    RenderWorkspace<S, B>& ws) {
@@ -124,11 +124,11 @@ void render_models(Map<S, B>& map, Frame<S, B>& frame, const PinholeCamera<S>& c
   rp.surface = false;  // the segmentation needs depth alone
   const int w = camera.width, h = camera.height;
   if (!frame.segmentation.same_size(w, h)) frame.segmentation = Image<int, B>(w, h, -1, backend);
-  if (!ws.object_depth.same_size(w, h)) ws.object_depth = Image<S, B>(w, h, S(0), backend);
+  if (!frame.object_depth.same_size(w, h)) frame.object_depth = Image<S, B>(w, h, S(0), backend);
   // Nearest object per pixel first; then the background, rendered only
   // where an object was drawn (elsewhere nothing competes with it) and
   // only up to the depth where it would lose.
-  ws.object_depth.fill(S(0));
+  frame.object_depth.fill(S(0));
   frame.segmentation.fill(-1);
   // The objects' casts are independent, each a few thousand rays marching
   // through a small volume, too few to fill a GPU: on CUDA each goes on a
@@ -148,16 +148,15 @@ void render_models(Map<S, B>& map, Frame<S, B>& frame, const PinholeCamera<S>& c
     const ObjectModel<S, B>& o = *map.objects[k];
     if (params.ignores(o.class_name())) continue;
     for_each_index(backend, w * h,
-                   detail::rendering::NearestObject<S>{o.rendering().depth.view(),
-                                                       ws.object_depth.view(), frame.segmentation.view(),
-                                                       int(k) + 1});
+                   detail::rendering::NearestObject<S>{o.rendering().depth.view(), frame.object_depth.view(),
+                                                       frame.segmentation.view(), int(k) + 1});
   }
   if (!map.objects.empty()) {
     // The background wins only in front of object depth - margin: its
     // rays stop there.
     if (!ws.background_ray_end.same_size(w, h)) ws.background_ray_end = Image<S, B>(w, h, S(0), backend);
     for_each_index(backend, w * h,
-                   detail::rendering::BackgroundRayEnd<S>{std::as_const(ws.object_depth).view(),
+                   detail::rendering::BackgroundRayEnd<S>{std::as_const(frame.object_depth).view(),
                                                           ws.background_ray_end.view(), params.occlusion_margin});
     map.background.visit([&](const auto& background) {
       raycast(background, camera, map.T_world_camera, ws.background, rp,
@@ -166,7 +165,7 @@ void render_models(Map<S, B>& map, Frame<S, B>& frame, const PinholeCamera<S>& c
   }
   const ImageView<const S> bg = map.objects.empty() ? ImageView<const S>{} : std::as_const(ws.background).depth.view();
   for_each_index(backend, w * h,
-                 detail::rendering::ResolveBackground<S>{bg, std::as_const(ws.object_depth).view(),
+                 detail::rendering::ResolveBackground<S>{bg, std::as_const(frame.object_depth).view(),
                                                          frame.segmentation.view(), params.occlusion_margin,
                                                          frame.points.view(), params.occlusion_seen_through});
 }
@@ -185,11 +184,11 @@ void render_models(Map<S, B>& map, Frame<S, B>& frame, const PinholeCamera<S>& c
 template <class S, Backend B>
 std::vector<int> seen_segmentation(const Frame<S, B>& frame, const SystemParams<S>& params, RenderWorkspace<S, B>& ws) {
   const int w = frame.segmentation.width(), h = frame.segmentation.height();
-  if (!ws.object_depth.same_size(w, h)) return frame.segmentation.to_host();  // nothing drawn yet
+  if (!frame.object_depth.same_size(w, h)) return frame.segmentation.to_host();  // nothing drawn yet
   if (!ws.seen.same_size(w, h)) ws.seen = Image<int, B>(w, h, -1, frame.segmentation.backend());
   for_each_index(frame.segmentation.backend(), w * h,
                  detail::rendering::SeenLabel<S>{std::as_const(frame.segmentation).view(),
-                                                 std::as_const(ws.object_depth).view(), frame.points.view(),
+                                                 std::as_const(frame.object_depth).view(), frame.points.view(),
                                                  ws.seen.view(), params.occlusion_margin});
   return ws.seen.to_host();
 }

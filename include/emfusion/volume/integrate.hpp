@@ -13,6 +13,8 @@
 // of the pixel the model does not own, and forgets that share of what it
 // held: a trace of an object in the background (fused while the object
 // stood still) goes as soon as the rays end on the object behind it.
+// IntegrationWeights::others_drawn confines that to the pixels where
+// another model is drawn (the system passes its rendered object depth).
 //
 // Refinements of the plain projective update, all off by default and on in
 // IntegrationParams::refined() (docs/decisions.md has the measurements):
@@ -67,8 +69,9 @@ struct IntegrationParams {
   /// does not own: what they held keeps the weight W(v) q(u) (the paper's
   /// "reweigh the accumulated weight W(v) with w_u", in front of the points
   /// only) and, within the truncation, +truncation takes the weight
-  /// (1 - q(u)) free_space_weight beside q(u)'s update. 0 = off (the paper).
-  /// Needs a weight image.
+  /// (1 - q(u)) free_space_weight beside q(u)'s update, at the pixels
+  /// where IntegrationWeights::others_drawn is positive (every pixel without
+  /// it). 0 = off (the paper). Needs a weight image.
   S unowned_free_from = S(0);
 
   /// The refinements for accurate geometry from clean depth (synthetic data,
@@ -132,6 +135,7 @@ struct VoxelUpdate {
   ImageView<const S> weights;     // empty: weight 1
   ImageView<const S> incidence;   // empty: cosine 1 (refinements off)
   ImageView<const S> near_depth;  // empty: no silhouette guard
+  ImageView<const S> others_drawn;  // empty: unowned_free_from at every pixel
   PinholeCamera<S> camera;
   IntegrationParams<S> params;
   S truncation;
@@ -168,7 +172,8 @@ struct VoxelUpdate {
       if (params.weight_by_incidence) w *= c;
     }
     const S from = params.unowned_free_from * trunc;
-    if (from > S(0) && sdf >= from && q < S(1) && free_beside(from)) {
+    if (from > S(0) && sdf >= from && q < S(1) && free_beside(from) &&
+        (others_drawn.empty() || others_drawn(u, v) > S(0))) {
       keep = q;
       if (sdf < trunc) w_free = params.free_space_weight * (S(1) - q);
     }
@@ -398,6 +403,22 @@ S max_valid_depth(const Image<S, B>& depth) {
                                 detail::Larger<S>{});
 }
 
+/// The per-pixel images that weigh an integration, each null or of the
+/// depth image's size on the volume's backend: `owned`, q(u) of eq. 10
+/// (null: 1 at every pixel), and `others_drawn`, positive where another
+/// model is drawn (a rendered depth, 0 elsewhere), the only pixels where
+/// IntegrationParams::unowned_free_from forgets (null: every pixel). The
+/// system passes its background the E-step's image and the nearest object
+/// surface render_models drew (Frame::object_depth): a background pixel
+/// next to an object that the E-step shares with it is the background's
+/// own surface, not a trace, and forgetting there cost the camera 0.01-0.03
+/// cm on every composite of bench/generalisation.py (docs/decisions.md).
+template <class S, Backend B>
+struct IntegrationWeights {
+  const Image<S, B>* owned = nullptr;
+  const Image<S, B>* others_drawn = nullptr;
+};
+
 /// Per-pixel images integrate() derives from the depth (incidence, the
 /// silhouette guard's nearest depths); pass one to reuse their memory across
 /// calls instead of allocating them every time.
@@ -414,12 +435,16 @@ namespace detail {
 /// the part of integration that does not depend on the volume's layout.
 template <class S, Backend B>
 VoxelUpdate<S> prepare_voxel_update(const Image<S, B>& depth, const PinholeCamera<S>& camera,
-                                    const Image<S, B>* weights, const IntegrationParams<S>& params, S voxel_size,
-                                    S truncation, const B& backend, IntegrationWorkspace<S, B>& ws, const char* where,
-                                    const PixelBox& box) {
+                                    const IntegrationWeights<S, B>& pixel_weights, const IntegrationParams<S>& params,
+                                    S voxel_size, S truncation, const B& backend, IntegrationWorkspace<S, B>& ws,
+                                    const char* where, const PixelBox& box) {
   camera.validate(where);
   detail::require_image(depth.view(), camera.width, camera.height, where, "depth image");
+  const Image<S, B>* weights = pixel_weights.owned;
+  const Image<S, B>* others_drawn = pixel_weights.others_drawn;
   if (weights) detail::require_image(weights->view(), depth.width(), depth.height(), where, "weight image");
+  if (others_drawn)
+    detail::require_image(others_drawn->view(), depth.width(), depth.height(), where, "others_drawn image");
   detail::require(params.silhouette_guard >= S(0), where,
                   "silhouette_guard must not be negative, got " + std::to_string(double(params.silhouette_guard)));
   detail::require(params.max_weight > S(0), where,
@@ -451,22 +476,28 @@ VoxelUpdate<S> prepare_voxel_update(const Image<S, B>& depth, const PinholeCamer
         backend, box, detail::NearestDepthPass<S>{depth.view(), std::as_const(rows).view(), near.view(), lateral, 0, 1});
     near_depth = std::as_const(near).view();
   }
-  return VoxelUpdate<S>{
-      depth.view(), weights ? weights->view() : ImageView<const S>{}, incidence, near_depth, camera, params,
-      truncation};
+  const auto view_of = [](const Image<S, B>* image) { return image ? image->view() : ImageView<const S>{}; };
+  return VoxelUpdate<S>{.depth = depth.view(),
+                        .weights = view_of(weights),
+                        .incidence = incidence,
+                        .near_depth = near_depth,
+                        .others_drawn = view_of(others_drawn),
+                        .camera = camera,
+                        .params = params,
+                        .truncation = truncation};
 }
 }  // namespace detail
 
 /// Fuses `depth` (metres, 0 = invalid), seen by `camera` at `T_world_camera`,
-/// into `volume`. `weights`, if non-empty, gives q(u) per pixel and must have
-/// the depth image's size. Runs on the volume's backend; the images must live
-/// there too. `workspace` (optional) keeps the derived images' memory.
-/// With `run_on`, the work is queued there (a lane of ConcurrentLanes, so
-/// that several objects integrate at once; each then needs a workspace of
-/// its own) instead of on the volume's backend.
+/// into `volume`, weighed per pixel by `weights` (IntegrationWeights). Runs
+/// on the volume's backend; the images must live there too. `workspace`
+/// (optional) keeps the derived images' memory. With `run_on`, the work is
+/// queued there (a lane of ConcurrentLanes, so that several objects
+/// integrate at once; each then needs a workspace of its own) instead of on
+/// the volume's backend.
 template <class S, Backend B, class Store>
 void integrate(TsdfVolume<S, B, Store>& volume, const Image<S, B>& depth, const PinholeCamera<S>& camera,
-               const SE3<S>& T_world_camera, const Image<S, B>* weights = nullptr,
+               const SE3<S>& T_world_camera, const IntegrationWeights<S, B>& weights,
                const IntegrationParams<S>& params = {}, IntegrationWorkspace<S, B>* workspace = nullptr,
                const B* run_on = nullptr) {
   IntegrationWorkspace<S, B> local;
@@ -490,6 +521,16 @@ void integrate(TsdfVolume<S, B, Store>& volume, const Image<S, B>& depth, const 
   // (64 GiB even in half storage).
   const int runs = (nz + z_run - 1) / z_run;
   for_each_index(backend, volume.dims()[0] * volume.dims()[1] * runs, f);
+}
+
+/// The same with q(u) alone: `weights` (optional) of the depth image's size.
+template <class S, Backend B, class Store>
+void integrate(TsdfVolume<S, B, Store>& volume, const Image<S, B>& depth, const PinholeCamera<S>& camera,
+               const SE3<S>& T_world_camera, const Image<S, B>* weights = nullptr,
+               const IntegrationParams<S>& params = {}, IntegrationWorkspace<S, B>* workspace = nullptr,
+               const B* run_on = nullptr) {
+  integrate(volume, depth, camera, T_world_camera, IntegrationWeights<S, B>{weights, nullptr}, params, workspace,
+            run_on);
 }
 
 }  // namespace emfusion

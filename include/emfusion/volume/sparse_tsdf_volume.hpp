@@ -652,16 +652,16 @@ struct SparseIntegration {
 };
 
 /// Fuses `depth` into a sparse volume: allocates the blocks of its truncation
-/// band (allocate_blocks, the pixels of positive weight when `weights` is
-/// given), then applies the dense volume's per-voxel update (eq. 10 with
-/// `params`, integrate.hpp) to every voxel of every allocated block in view,
-/// so that a voxel, once allocated, evolves exactly as the dense volume's
-/// voxel at the same place. Space outside allocated blocks is not carved:
-/// it stays never observed.
+/// band (allocate_blocks, the pixels of positive weight when q(u), i.e.
+/// `weights.owned`, is given), then applies the dense volume's per-voxel
+/// update (eq. 10 with `params` and `weights`, integrate.hpp) to every voxel
+/// of every allocated block in view, so that a voxel, once allocated,
+/// evolves exactly as the dense volume's voxel at the same place. Space
+/// outside allocated blocks is not carved: it stays never observed.
 template <class S, Backend B, class Store>
 SparseIntegration integrate(SparseTsdfVolume<S, B, Store>& volume, const Image<S, B>& depth,
                             const PinholeCamera<S>& camera, const SE3<S>& T_world_camera,
-                            const Image<S, B>* weights = nullptr, const IntegrationParams<S>& params = {},
+                            const IntegrationWeights<S, B>& weights, const IntegrationParams<S>& params = {},
                             SparseIntegrationWorkspace<S, B>* workspace = nullptr) {
   SparseIntegrationWorkspace<S, B> local;
   SparseIntegrationWorkspace<S, B>& ws = workspace ? *workspace : local;
@@ -670,7 +670,7 @@ SparseIntegration integrate(SparseTsdfVolume<S, B, Store>& volume, const Image<S
       depth, camera, weights, params, volume.voxel_size(), volume.truncation(), backend, ws.images, "integrate",
       PixelBox::whole(camera.width, camera.height));
   SparseIntegration result;
-  result.allocation = allocate_blocks(volume, depth, camera, T_world_camera, weights, &ws);
+  result.allocation = allocate_blocks(volume, depth, camera, T_world_camera, weights.owned, &ws);
   const SE3<S> T_camera_volume = T_world_camera.inverse() * volume.pose();
   S far = std::numeric_limits<S>::infinity();
   // As for the dense volume: the far plane pays on the CPU only.
@@ -686,6 +686,16 @@ SparseIntegration integrate(SparseTsdfVolume<S, B, Store>& volume, const Image<S
   for_each_index(backend, result.blocks_in_view * std::int64_t(detail::sparse::block_side * detail::sparse::block_side),
                  Column{view, raw_data(ws.blocks), update, T_camera_volume});
   return result;
+}
+
+/// The same with q(u) alone: `weights` (optional) of the depth image's size.
+template <class S, Backend B, class Store>
+SparseIntegration integrate(SparseTsdfVolume<S, B, Store>& volume, const Image<S, B>& depth,
+                            const PinholeCamera<S>& camera, const SE3<S>& T_world_camera,
+                            const Image<S, B>* weights = nullptr, const IntegrationParams<S>& params = {},
+                            SparseIntegrationWorkspace<S, B>* workspace = nullptr) {
+  return integrate(volume, depth, camera, T_world_camera, IntegrationWeights<S, B>{weights, nullptr}, params,
+                   workspace);
 }
 
 }  // namespace emfusion
