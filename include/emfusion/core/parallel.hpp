@@ -295,7 +295,7 @@ SegmentGroups equal_groups(const B& backend, int groups, int n, int segments,
     for (int j = 0; j < segments; ++j) words.push_back(g);
   words.insert(words.end(), std::size_t(groups), 0);
   if (storage.size() < words.size()) storage.resize(words.size());
-  int* on_backend = thrust::raw_pointer_cast(storage.data());
+  int* on_backend = raw_data(storage);
   copy_to_backend(backend, words.data(), words.size(), on_backend);
   static_assert(sizeof(unsigned) == sizeof(int), "the counters share the layout's words");
   return SegmentGroups{total, groups, on_backend, on_backend + total + 1, on_backend + total + groups + 2,
@@ -368,17 +368,15 @@ std::vector<T> reduce_per_group(const B& backend, const std::vector<View>& views
                                 PerGroupWorkspace<View, T, B>& ws) {
   if (views.empty()) return {};
   if (ws.views.size() < views.size()) ws.views.resize(views.size());
-  copy_to_backend(backend, views.data(), views.size(), thrust::raw_pointer_cast(ws.views.data()));
+  copy_to_backend(backend, views.data(), views.size(), raw_data(ws.views));
   const int segments = std::max(1, std::min(64, n / 4096));  // segments of at least 4096 indices
   const SegmentGroups layout = equal_groups(backend, int(views.size()), n, segments, ws.layout);
   if (ws.partials.size() < std::size_t(layout.segments)) ws.partials.resize(std::size_t(layout.segments));
   if (ws.results.size() < views.size()) ws.results.resize(views.size());
-  grouped_accumulate(backend, layout,
-                     detail::PerGroupIndex<View, T, F>{thrust::raw_pointer_cast(ws.views.data()), n, f}, zero,
-                     thrust::raw_pointer_cast(ws.partials.data()),
-                     detail::StoreGroupResult<T>{thrust::raw_pointer_cast(ws.results.data())});
+  grouped_accumulate(backend, layout, detail::PerGroupIndex<View, T, F>{raw_data(ws.views), n, f}, zero,
+                     raw_data(ws.partials), detail::StoreGroupResult<T>{raw_data(ws.results)});
   std::vector<T> out(views.size());
-  copy_to_host(backend, thrust::raw_pointer_cast(std::as_const(ws.results).data()), out.size(), out.data());
+  copy_to_host(backend, raw_data(std::as_const(ws.results)), out.size(), out.data());
   return out;
 }
 

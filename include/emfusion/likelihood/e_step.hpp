@@ -228,7 +228,7 @@ void run_e_step(const B& backend, const Image<Vec3<S>, B>& points, const M* back
   put(at_views, views.data(), views.size() * sizeof(ImageView<S>));
   if (out.scratch_.size() < size) out.scratch_.resize(size);
   thrust::copy(bytes.begin(), bytes.end(), out.scratch_.begin());
-  unsigned char* base = thrust::raw_pointer_cast(out.scratch_.data());
+  unsigned char* base = raw_data(out.scratch_);
   const auto* models = reinterpret_cast<const Objects*>(base + at_models);
   const auto* poses = reinterpret_cast<const SE3<S>*>(base + at_poses);
   auto* images = reinterpret_cast<ImageView<S>*>(base + at_views);

@@ -166,7 +166,7 @@ struct BatchedSolveWorkspace {
   /// Part `at` of `packed`, as values of type T.
   template <class T>
   T* part(std::size_t at) {
-    return reinterpret_cast<T*>(thrust::raw_pointer_cast(packed.data()) + at);
+    return reinterpret_cast<T*>(raw_data(packed) + at);
   }
 };
 
@@ -229,7 +229,7 @@ void lay_out(const B& backend, const std::vector<BatchedProblem<P, N>>& problems
   ws.at_requests = packed.add(requests);
   ws.at_solves = packed.add(solves);
   if (ws.packed.size() < packed.words.size()) ws.packed.resize(packed.words.size());
-  copy_to_backend(backend, packed.words.data(), packed.words.size(), thrust::raw_pointer_cast(ws.packed.data()));
+  copy_to_backend(backend, packed.words.data(), packed.words.size(), raw_data(ws.packed));
   ws.segment_count = int(offsets.size()) - 1;
   ws.total_terms = first_term.back();
   ws.groups = SegmentGroups{ws.segment_count,
@@ -251,7 +251,7 @@ BatchedTerm<S, P, N> batch_terms(bool keep_values, BatchedSolveWorkspace<S, B>& 
           ws.template part<LinearizationRequest<S>>(ws.at_requests),
           ws.template part<int>(ws.at_first_term),
           ws.groups.groups,
-          keep_values ? thrust::raw_pointer_cast(ws.values.data()) : nullptr,
+          keep_values ? raw_data(ws.values) : nullptr,
           ws.total_terms};
 }
 
@@ -278,9 +278,8 @@ std::vector<NormalEquations6> linearize_batch(const B& backend, const std::vecto
   for (auto& q : requests) q.write_slot = q.read_slot = -1;
   detail::lay_out(backend, problems, requests, {}, ws);
   grouped_accumulate(backend, ws.groups, detail::batch_terms<S, B, P, N>(false, ws), NormalEquations6::zero(),
-                     thrust::raw_pointer_cast(ws.partials.data()),
-                     detail::StoreGroupResult<NormalEquations6>{thrust::raw_pointer_cast(ws.sums.data())});
-  return detail::download(backend, thrust::raw_pointer_cast(ws.sums.data()), problems.size());
+                     raw_data(ws.partials), detail::StoreGroupResult<NormalEquations6>{raw_data(ws.sums)});
+  return detail::download(backend, raw_data(ws.sums), problems.size());
 }
 
 /// Levenberg-Marquardt with parameters `params` for every problem from its
@@ -324,7 +323,7 @@ std::vector<SE3<S>> solve_batch(const B& backend, const std::vector<BatchedProbl
   // Every pass advances every running solve once; the loop ends when none
   // runs (on a device the device decides, without the host looking).
   grouped_accumulate_while(backend, ws.loop, ws.groups, detail::batch_terms<S, B, P, N>(true, ws),
-                           NormalEquations6::zero(), thrust::raw_pointer_cast(ws.partials.data()),
+                           NormalEquations6::zero(), raw_data(ws.partials),
                            detail::AdvanceSolve<S>{on_backend, requested, params}, params.max_iterations + 1);
   solves = detail::download(backend, on_backend, n);
   std::vector<SE3<S>> solved(n);

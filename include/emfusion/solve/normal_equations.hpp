@@ -136,10 +136,10 @@ class LinearizationCache {
   TermValue<S>* begin_write(int k, int n) {
     filled_[k] = false;
     if (int(values_[k].size()) != n) values_[k].resize(std::size_t(n));
-    return thrust::raw_pointer_cast(values_[k].data());
+    return raw_data(values_[k]);
   }
   void filled(int k, const SE3<S>& T) { poses_[k] = T, filled_[k] = true; }
-  const TermValue<S>* values(int k) const { return thrust::raw_pointer_cast(values_[k].data()); }
+  const TermValue<S>* values(int k) const { return raw_data(values_[k]); }
 
  private:
   static bool same(const SE3<S>& a, const SE3<S>& b) {

@@ -362,7 +362,7 @@ TriangleMesh<S> extract_mesh(const Grid& grid, const B& backend) {
   Index triangle_count = 0;
   {
     typename B::template Vector<std::uint8_t> counts(cells);
-    for_each_index(backend, cells, CountCellTriangles<Grid>{grid, thrust::raw_pointer_cast(counts.data())});
+    for_each_index(backend, cells, CountCellTriangles<Grid>{grid, raw_data(counts)});
     const Index active_count = thrust::count_if(policy, counts.begin(), counts.end(), IsNonZero{});
     if (active_count == 0) return mesh;
 
@@ -370,8 +370,8 @@ TriangleMesh<S> extract_mesh(const Grid& grid, const B& backend) {
     thrust::copy_if(policy, thrust::counting_iterator<Index>(0), thrust::counting_iterator<Index>(cells),
                     counts.begin(), active.begin(), IsNonZero{});
     typename B::template Vector<Index> ends(active_count);
-    thrust::transform_inclusive_scan(policy, active.begin(), active.end(), ends.begin(),
-                                     CountOfCell{thrust::raw_pointer_cast(counts.data())}, SumInt64{});
+    thrust::transform_inclusive_scan(policy, active.begin(), active.end(), ends.begin(), CountOfCell{raw_data(counts)},
+                                     SumInt64{});
     backend.synchronize();
     triangle_count = ends.back();
     require(3 * triangle_count <= Index(INT_MAX), "marching_cubes",
@@ -379,9 +379,7 @@ TriangleMesh<S> extract_mesh(const Grid& grid, const B& backend) {
 
     corner_keys.resize(3 * triangle_count);
     for_each_index(backend, active_count,
-                   WriteCellTriangles<Grid>{grid, thrust::raw_pointer_cast(active.data()),
-                                            thrust::raw_pointer_cast(ends.data()),
-                                            thrust::raw_pointer_cast(corner_keys.data())});
+                   WriteCellTriangles<Grid>{grid, raw_data(active), raw_data(ends), raw_data(corner_keys)});
   }
 
   // Welding: one vertex per distinct edge name.
@@ -395,9 +393,7 @@ TriangleMesh<S> extract_mesh(const Grid& grid, const B& backend) {
 
   typename B::template Vector<Vec3<S>> vertices(vertex_count), normals(vertex_count);
   for_each_index(backend, vertex_count,
-                 PlaceEdgeVertices<Grid, S>{grid, thrust::raw_pointer_cast(vertex_keys.data()),
-                                            thrust::raw_pointer_cast(vertices.data()),
-                                            thrust::raw_pointer_cast(normals.data())});
+                 PlaceEdgeVertices<Grid, S>{grid, raw_data(vertex_keys), raw_data(vertices), raw_data(normals)});
   backend.synchronize();
 
   mesh.vertices.resize(std::size_t(vertex_count));
@@ -424,7 +420,7 @@ typename B::template Vector<std::int8_t> marching_cubes_table_on() {
 template <class S, Backend B, class Store>
 TriangleMesh<S> marching_cubes_of(const TsdfVolume<S, B, Store>& volume, S iso, S min_weight) {
   const auto table = marching_cubes_table_on<B>();
-  const MarchingCubesGrid<S, Store> grid{volume.view(), {thrust::raw_pointer_cast(table.data())}, iso, min_weight};
+  const MarchingCubesGrid<S, Store> grid{volume.view(), {raw_data(table)}, iso, min_weight};
   return extract_mesh<S>(grid, volume.backend());
 }
 
@@ -434,9 +430,8 @@ TriangleMesh<S> marching_cubes_of(const SparseTsdfVolume<S, B, Store>& volume, S
   const auto view = volume.view();
   typename B::template Vector<int> neighbours(std::size_t(view.blocks) * 8);
   for_each_index(volume.backend(), std::int64_t(view.blocks) * 8,
-                 FindBlockNeighbours<decltype(view)>{view, thrust::raw_pointer_cast(neighbours.data())});
-  const SparseMarchingCubesGrid<S, Store> grid{view, thrust::raw_pointer_cast(neighbours.data()),
-                                               {thrust::raw_pointer_cast(table.data())}, iso, min_weight};
+                 FindBlockNeighbours<decltype(view)>{view, raw_data(neighbours)});
+  const SparseMarchingCubesGrid<S, Store> grid{view, raw_data(neighbours), {raw_data(table)}, iso, min_weight};
   return extract_mesh<S>(grid, volume.backend());
 }
 
