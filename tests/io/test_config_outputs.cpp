@@ -30,6 +30,13 @@ TEST_CASE("Config files and overrides set parameters by name", "[io]") {
   SystemParams<float> q;
   for (const auto& e : parameter_table<float>()) set_parameter(q, e.name, e.get(p));
   for (const auto& e : parameter_table<float>()) CHECK(e.get(q) == e.get(p));
+  // A float prints as the text that reads back as it, as a user wrote it
+  // (run.json's settings), not as its widened double's 0.699999988079071.
+  for (const auto& e : parameter_table<float>()) {
+    if (std::string(e.name) == "alpha") CHECK(e.get(p) == "0.7");
+    if (std::string(e.name) == "bilateral_sigma_depth") CHECK(e.get(p) == "0.04");
+    if (std::string(e.name) == "match_iou") CHECK(e.get(p) == "0.2");  // a double field
+  }
 }
 
 TEST_CASE("static_classes and float parameters read back as they print", "[io]") {

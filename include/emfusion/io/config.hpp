@@ -59,6 +59,13 @@ inline bool to_bool(const std::string& text, const char* name) {
   throw std::invalid_argument(std::string(name) + ": '" + text + "' is not true or false");
 }
 inline std::string print(double v) { return detail::tum::format(v); }
+/// A float as its shortest text that reads back as the same float ("0.04",
+/// not the widened double's "0.03999999910593033").
+inline std::string print(float v) {
+  char buffer[32];
+  const auto result = std::to_chars(buffer, buffer + sizeof(buffer), v);
+  return std::string(buffer, result.ptr);
+}
 
 }  // namespace detail::config
 
@@ -67,10 +74,10 @@ template <class S>
 const std::vector<ParameterEntry<S>>& parameter_table() {
   using P = SystemParams<S>;
   using namespace detail::config;
-#define EMF_NUMBER(name, field, meaning)                                                          \
-  ParameterEntry<S> {                                                                             \
+#define EMF_NUMBER(name, field, meaning)                                                                \
+  ParameterEntry<S> {                                                                                   \
     name, meaning, [](P& p, const std::string& v) { p.field = to_scalar<decltype(p.field)>(v, name); }, \
-        [](const P& p) { return print(double(p.field)); }                                         \
+        [](const P& p) { return print(p.field); }                                                       \
   }
 #define EMF_INTEGER(name, field, meaning)                                                                       \
   ParameterEntry<S> {                                                                                           \
