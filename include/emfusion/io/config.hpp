@@ -148,7 +148,8 @@ const std::vector<ParameterEntry<S>>& parameter_table() {
                  "no free-space carving within this many voxels of a silhouette (0: off)"),
       EMF_NUMBER("object_silhouette_guard", object_integration.silhouette_guard, "the same for objects"),
       EMF_NUMBER("background_unowned_free_from", background_integration.unowned_free_from,
-                 "free space for the background this many truncations in front of points it does not own (0: off)"),
+                 "free space for the background this many truncations in front of points an object drawn there "
+                 "owns (0: off)"),
       EMF_NUMBER("match_iou", match_iou, "detection-to-object mask IoU threshold"),
       EMF_INTEGER("min_mask_pixels", min_mask_pixels, "smallest detection / visible mask (px)"),
       EMF_NUMBER("max_object_distance", max_object_distance, "farthest new object centre (m)"),

@@ -129,8 +129,12 @@ struct SystemParams {
   // Mapping (eq. 10): the paper's update plus the silhouette guard (free
   // space is not carved along silhouettes): on synthetic scenes without it a
   // static camera drifts 5 mm in one frame, with it 0.3 mm; on redkitchen_300
-  // camera ATE is 2.24 cm with it and 2.25 cm without (docs/system.md).
-  IntegrationParams<S> background_integration = guarded();
+  // camera ATE is 2.24 cm with it and 2.25 cm without (docs/system.md). The
+  // background also forgets what it holds 0.2 truncations or more in front
+  // of points an object drawn there owns (unowned_free_from: the trace of an
+  // object that stood still goes once it moves; docs/system.md, "Forgetting
+  // the traces"); 0 turns that off.
+  IntegrationParams<S> background_integration = forgetting_traces();
   IntegrationParams<S> object_integration = guarded();
 
   // Detections (sec. 3.5).
@@ -349,6 +353,11 @@ struct SystemParams {
   static IntegrationParams<S> guarded() {
     IntegrationParams<S> p;
     p.silhouette_guard = S(1.5);
+    return p;
+  }
+  static IntegrationParams<S> forgetting_traces() {
+    IntegrationParams<S> p = guarded();
+    p.unowned_free_from = S(0.2);
     return p;
   }
 
