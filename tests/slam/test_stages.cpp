@@ -722,6 +722,35 @@ TEMPLATE_LIST_TEST_CASE("Stages alone: a point in space the background never saw
     CHECK(box_marked < 0.05 * box);  // nothing seen behind it: new background
 }
 
+TEMPLATE_LIST_TEST_CASE("Stages alone: object_pose_prior holds an object's solve at its start", "[slam]",
+                        emfusion::test::HeavyConfigs) {
+  using S = typename TestType::Scalar;
+  using B = typename TestType::Backend;
+  // The object's pose put 1.5 cm off the box it was made from: its solve
+  // goes back onto the box; with a prior of overwhelming weight it stays
+  // where it started.
+  const auto offset_after_tracking = [](S prior) {
+    OneFrameMap<S, B> m;
+    REQUIRE(m.map.objects.size() == 1);
+    m.s.params.object_pose_prior = prior;
+    PaperLikelihood<S> likelihood;
+    likelihood.params = m.s.params.likelihood;
+    const SE3<S> made = m.map.objects[0]->pose();
+    m.map.objects[0]->set_pose(SE3<S>::translation(vec3(S(0.015), S(0), S(0))) * made);
+    preprocess(m.depth, m.s.camera, m.s.params, m.frame);
+    associate(m.map, m.frame, likelihood, m.s.params);
+    const std::vector<PoseTrack> tracks =
+        track_objects(m.map, m.frame, m.s.params, HuberNorm<S>{S(2)}, LevenbergMarquardt{});
+    REQUIRE(tracks.size() == 1);
+    CHECK(tracks[0].outcome == TrackingOutcome::tracked);
+    return double(norm(m.map.objects[0]->pose().translation() - made.translation()));
+  };
+  const double free = offset_after_tracking(S(0)), held = offset_after_tracking(S(1e7));
+  INFO("offset from the box after the solve: " << free << " m free, " << held << " m held");
+  CHECK(free < 0.005);
+  CHECK(held > 0.013);
+}
+
 TEMPLATE_LIST_TEST_CASE(
     "Stages alone: with background_unowned_free_from the background forgets an object's trace "
     "where the object is drawn",

@@ -7,6 +7,7 @@
 
 #include "emfusion/core/image.hpp"
 #include "emfusion/solve/normal_equations.hpp"
+#include "emfusion/solve/pose_prior.hpp"
 #include "emfusion/solve/solvers.hpp"
 #include "support/catch.hpp"
 #include "support/configs.hpp"
@@ -188,4 +189,99 @@ TEST_CASE("LM's cheap bound on the converged step is never below the step itself
   // And the bound is not far above it where poses are: a metre, a quarter turn.
   const SE3<double> T = SE3<double>::exp(Vec6<double>{{1, 0, 0, 0, 0, pi / 2}});
   CHECK(detail::step_norm_limit_bound(T, 1e-6) < 4 * detail::step_norm_limit(T, 1e-6));
+}
+
+namespace {
+
+/// Terms that see only a plane z = 1 (volume frame) through points of it
+/// at the pose T (the plane's z offset and its tilts are observed, motion
+/// along it and the turn about its normal are not), and one weak term that
+/// pulls T's x translation to `pull_to` (what a neighbour's pixels do to a
+/// flat patch of a model).
+template <class S>
+struct PlaneAndPull {
+  S pull_to = S(0.1), pull_weight = S(0.5);
+  EMF_HD int term_count() const { return 401; }
+  EMF_HD bool term(int i, const SE3<S>& T, S& r, Vec6<S>& J, S& w) const {
+    if (i == 400) {
+      r = T.translation().x() - pull_to;
+      const auto Jt = SE3<S>::left_jacobian_of_action(T.translation());
+      for (int j = 0; j < 6; ++j) J[j] = Jt(0, j);
+      w = pull_weight;
+      return true;
+    }
+    const Vec3<S> p = vec3(S(0.02) * S(i % 20) - S(0.19), S(0.02) * S(i / 20) - S(0.19), S(1));
+    const Vec3<S> x = T * p;
+    r = x.z() - S(1);
+    const auto Jx = SE3<S>::left_jacobian_of_action(x);
+    for (int j = 0; j < 6; ++j) J[j] = Jx(2, j);
+    w = S(1);
+    return true;
+  }
+};
+
+}  // namespace
+
+TEMPLATE_LIST_TEST_CASE("A pose prior holds the directions the data does not observe", "[solve]",
+                        emfusion::test::AllConfigs) {
+  using S = typename TestType::Scalar;
+  using B = typename TestType::Backend;
+  const B backend{};
+  const SE3<S> start(so3_exp(vec3(S(0.02), S(-0.01), S(0.05))), vec3(S(0.03), S(-0.02), S(0.04)));
+  PosePrior<S> prior;
+  prior.pose = start;
+  prior.centre = vec3(S(0), S(0), S(1));
+  prior.radius = S(0.2);
+
+  // The prior's Jacobian is that of its residuals under exp(xi) * T.
+  prior.weight = S(1);
+  const WithPosePrior<PlaneAndPull<S>, S> pulled{PlaneAndPull<S>{}, prior};
+  REQUIRE(pulled.term_count() == 407);
+  const SE3<S> T = SE3<S>(so3_exp(vec3(S(0.1), S(0.2), S(-0.1))), vec3(S(0.05), S(0.01), S(-0.03))) * start;
+  const double h = sizeof(S) <= 4 ? 1e-3 : 1e-6;
+  for (int i = 401; i < 407; ++i) {
+    S r, w;
+    Vec6<S> J;
+    REQUIRE(pulled.term(i, T, r, J, w));
+    CHECK(w == S(1));
+    for (int j = 0; j < 6; ++j) {
+      Vec6<S> xi = Vec6<S>::zero();
+      xi[j] = S(h);
+      S r_plus, r_minus, w2;
+      Vec6<S> J2;
+      pulled.term(i, SE3<S>::exp(xi) * T, r_plus, J2, w2);
+      xi[j] = S(-h);
+      pulled.term(i, SE3<S>::exp(xi) * T, r_minus, J2, w2);
+      // First order: the rotation rows drop the Jacobian of log (its error
+      // grows with the rotation between T and the prior, 0.24 rad here).
+      CHECK(double(J[j]) == emfusion::test::Approx((double(r_plus) - double(r_minus)) / (2 * h)).margin(0.04));
+    }
+  }
+  // At the prior's own pose its residuals are zero.
+  for (int i = 401; i < 407; ++i) {
+    S r, w;
+    Vec6<S> J;
+    pulled.term(i, start, r, J, w);
+    CHECK(std::abs(double(r)) < 1e-6);
+  }
+
+  const auto solve = [&](S weight) {
+    PosePrior<S> p = prior;
+    p.weight = weight;
+    const WithPosePrior<PlaneAndPull<S>, S> problem{PlaneAndPull<S>{}, p};
+    const auto lin = [&](const SE3<S>& pose, const SE3<S>* ref) {
+      return linearize(backend, problem, L2Norm<S>{}, pose, ref);
+    };
+    return levenberg_marquardt(lin, start, {});
+  };
+  // Without the prior the weak pull alone places x; with it x stays near
+  // its start, while the plane, which 400 points observe, is met either way.
+  const SE3<S> free = solve(S(0)), held = solve(S(20));
+  CHECK(double(free.translation().x()) == emfusion::test::Approx(0.1).margin(1e-3));
+  INFO("x: " << free.translation().x() << " free, " << held.translation().x() << " held");
+  CHECK(std::abs(double(held.translation().x()) - 0.03) < 0.01);
+  for (const SE3<S>& solved : {free, held}) {
+    const Vec3<S> on_plane = solved * vec3(S(0), S(0), S(1));
+    CHECK(double(on_plane.z()) == emfusion::test::Approx(1.0).margin(2e-3));
+  }
 }

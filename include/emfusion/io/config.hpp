@@ -116,6 +116,8 @@ const std::vector<ParameterEntry<S>>& parameter_table() {
                  "the camera's solve stops when the undamped step is shorter (0 = off)"),
       EMF_BOOL("predict_motion", predict_motion, "start pose solves at the constant-velocity prediction"),
       EMF_BOOL("retry_tracking", retry_tracking, "re-run an untracked solve from the other start"),
+      EMF_NUMBER("object_pose_prior", object_pose_prior,
+                 "pull of each object's solve towards its start, in surface points per direction (0: off)"),
       EMF_NUMBER("depth_noise_reference", depth_noise_reference,
                  "metres; tracking terms deeper weigh (sigma(ref)/sigma(z))^2, 0 = off"),
       EMF_NUMBER("max_depth", max_depth, "metres; deeper pixels are holes (0 = no limit)"),

@@ -102,6 +102,12 @@ struct SystemParams {
   /// A solve whose outcome is not `tracked` is run again from the other
   /// start (the last pose when it began at the prediction, or the reverse).
   bool retry_tracking = false;
+  /// Each object's solve pulled towards its start (the pose it had, or its
+  /// prediction) by six terms of this weight each, in surface points
+  /// (solve/pose_prior.hpp): the directions its depth does not observe (a
+  /// cylinder's axis seen from its side, the plane of a flat side) stay
+  /// there. 0: off (the paper).
+  S object_pose_prior = S(0);
   /// Depth-noise weighting of tracking terms (SdfAlignmentParams): 0 = off.
   S depth_noise_reference = S(0);
   /// An object whose alignment has fewer terms keeps its previous pose.
@@ -384,6 +390,7 @@ struct SystemParams {
                     w, "motion bounds must be positive (infinity: no bound)");
     lm.validate(w);
     detail::require(huber_voxels > S(0), w, "huber_voxels must be positive");
+    detail::require(object_pose_prior >= S(0), w, "object_pose_prior must not be negative (0: off)");
     detail::require(object_colour_weight >= S(0), w, "object_colour_weight must not be negative (0: depth alone)");
     detail::require(pixel_stride >= 1, w, "pixel_stride must be at least 1");
     detail::require(pyramid_levels >= 1 && pyramid_levels <= 6, w, "pyramid_levels must be in 1..6");

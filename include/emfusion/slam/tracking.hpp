@@ -30,6 +30,7 @@
 #include "emfusion/slam/map.hpp"
 #include "emfusion/slam/motion_prediction.hpp"
 #include "emfusion/slam/params.hpp"
+#include "emfusion/solve/pose_prior.hpp"
 #include "emfusion/solve/sdf_alignment.hpp"
 #include "emfusion/solve/solvers.hpp"
 
@@ -135,18 +136,21 @@ struct PoseStarts {
 /// track.step and track.outcome from track.report) does not find the first
 /// solve `tracked`. Returns the pose of the solve taken (the retry's if it
 /// was tracked, else the first's) and fills `track`. Any PoseSolver, one
-/// iteration after another through its Linearizer.
+/// iteration after another through its Linearizer. With `prior`, each solve
+/// is pulled towards its start (the prior's pose is replaced by it).
 template <class S, Backend B, class Volume, class Norm, class Solver, class Judge>
-  requires RobustNorm<Norm, S> && PoseSolver<Solver, S>
-SE3<S> track_terms(const B& backend, const SdfAlignmentTerms<S, Volume>& terms, const PoseStarts<S>& starts,
-                   const Norm& norm, const SdfAlignmentParams<S>& align, const Solver& solver, bool retry,
-                   Judge&& judge, PoseTrack& track, LinearizationCache<S, B>& cache) {
+requires RobustNorm<Norm, S> && PoseSolver<Solver, S> SE3<S> track_terms(
+    const B& backend, const SdfAlignmentTerms<S, Volume>& terms, const PoseStarts<S>& starts, const Norm& norm,
+    const SdfAlignmentParams<S>& align, const Solver& solver, bool retry, Judge&& judge, PoseTrack& track,
+    LinearizationCache<S, B>& cache, const PosePrior<S>* prior = nullptr) {
   const bool predicted_first =
       starts.predicted && agrees_at_least_as_well(backend, terms, norm, align, *starts.predicted, starts.previous);
   const auto solve_from = [&](bool from_prediction, PoseTrack& t) {
     t.from_prediction = from_prediction;
-    const SE3<S> T = solve_coarse_to_fine(backend, terms, norm, align, solver,
-                                          from_prediction ? *starts.predicted : starts.previous, &t.report, cache);
+    const SE3<S> start = from_prediction ? *starts.predicted : starts.previous;
+    PosePrior<S> pulled = prior ? *prior : PosePrior<S>{};
+    pulled.pose = start;
+    const SE3<S> T = solve_coarse_to_fine(backend, terms, norm, align, solver, start, &t.report, cache, &pulled);
     judge(T, t);
     return T;
   };
@@ -165,13 +169,12 @@ SE3<S> track_terms(const B& backend, const SdfAlignmentTerms<S, Volume>& terms, 
 /// `volume` (dense or sparse) weighted by `association`, over the box of
 /// its positive pixels.
 template <class S, Backend B, class Volume, class Norm, class Solver, class Judge>
-  requires TsdfVolumeOn<Volume, S, B> && RobustNorm<Norm, S> && PoseSolver<Solver, S>
-SE3<S> track_in_volume(const Volume& volume, const Image<Vec3<S>, B>& points, const Image<S, B>* association,
-                       const PoseStarts<S>& starts, const Norm& norm, const SdfAlignmentParams<S>& align,
-                       const Solver& solver, bool retry, Judge&& judge, PoseTrack& track,
-                       LinearizationCache<S, B>& cache, const B& backend) {
+requires TsdfVolumeOn<Volume, S, B> && RobustNorm<Norm, S> && PoseSolver<Solver, S> SE3<S> track_in_volume(
+    const Volume& volume, const Image<Vec3<S>, B>& points, const Image<S, B>* association, const PoseStarts<S>& starts,
+    const Norm& norm, const SdfAlignmentParams<S>& align, const Solver& solver, bool retry, Judge&& judge,
+    PoseTrack& track, LinearizationCache<S, B>& cache, const B& backend, const PosePrior<S>* prior = nullptr) {
   return track_terms(backend, sdf_alignment_in_box(volume, points, association, align, backend), starts, norm, align,
-                     solver, retry, std::forward<Judge>(judge), track, cache);
+                     solver, retry, std::forward<Judge>(judge), track, cache, prior);
 }
 
 /// track_in_volume for problems k = 0..n-1 at once (solved_in_batches):
@@ -180,15 +183,18 @@ SE3<S> track_in_volume(const Volume& volume, const Image<Vec3<S>, B>& points, co
 /// coarsest level (agrees_at_least_as_well), the solves run as one
 /// solve_coarse_to_fine_batch, and with `retry` the problems not `tracked`
 /// that have a second start as another. Returns each problem's pose as
-/// track_in_volume does and fills `tracks`.
+/// track_in_volume does and fills `tracks`. With `priors` (one per
+/// problem), each solve is pulled towards its start (each prior's pose is
+/// replaced by it).
 template <class S, Backend B, class Volume, class Norm, class Judge>
-  requires RobustNorm<Norm, S>
-std::vector<SE3<S>> track_in_volumes(const B& backend, const std::vector<SdfAlignmentTerms<S, Volume>>& terms,
-                                     const std::vector<Norm>& norms, const std::vector<PoseStarts<S>>& starts,
-                                     const SdfAlignmentParams<S>& align, const LevenbergMarquardt& solver, bool retry,
-                                     Judge&& judge, std::vector<PoseTrack>& tracks, BatchedSolveWorkspace<S, B>& ws) {
+requires RobustNorm<Norm, S> std::vector<SE3<S>> track_in_volumes(
+    const B& backend, const std::vector<SdfAlignmentTerms<S, Volume>>& terms, const std::vector<Norm>& norms,
+    const std::vector<PoseStarts<S>>& starts, const SdfAlignmentParams<S>& align, const LevenbergMarquardt& solver,
+    bool retry, Judge&& judge, std::vector<PoseTrack>& tracks, BatchedSolveWorkspace<S, B>& ws,
+    const std::vector<PosePrior<S>>* priors = nullptr) {
   using Terms = SdfAlignmentTerms<S, Volume>;
   const std::size_t n = terms.size();
+  detail::require(!priors || priors->size() == n, "track_in_volumes", "need one prior per problem");
   std::vector<char> predicted_first(n, 0);
   std::vector<BatchedProblem<Terms, Norm>> checks;
   std::vector<LinearizationRequest<S>> requests;
@@ -214,14 +220,17 @@ std::vector<SE3<S>> track_in_volumes(const B& backend, const std::vector<SdfAlig
     std::vector<Terms> some_terms;
     std::vector<Norm> some_norms;
     std::vector<SE3<S>> from;
+    std::vector<PosePrior<S>> pulled;
     for (const std::size_t k : which) {
       t[k].from_prediction = from_prediction(k);
       some_terms.push_back(terms[k]), some_norms.push_back(norms[k]);
       from.push_back(t[k].from_prediction ? *starts[k].predicted : starts[k].previous);
+      pulled.push_back(priors ? (*priors)[k] : PosePrior<S>{});
+      pulled.back().pose = from.back();
     }
     std::vector<SolveReport> reports;
     const std::vector<SE3<S>> solved =
-        solve_coarse_to_fine_batch(backend, some_terms, some_norms, align, solver, from, reports, ws);
+        solve_coarse_to_fine_batch(backend, some_terms, some_norms, align, solver, from, reports, ws, &pulled);
     for (std::size_t i = 0; i < which.size(); ++i) {
       const std::size_t k = which[i];
       t[k].report = reports[i], T[k] = solved[i];
@@ -397,6 +406,16 @@ std::vector<PoseTrack> track_objects(Map<S, B>& map, const Frame<S, B>& frame, c
   const auto to_world = [&](std::size_t k, const SE3<S>& T_vc) {
     return map.T_world_camera * T_vc.inverse() * map.objects[k]->T_object_volume().inverse();
   };
+  // object_pose_prior: each solve pulled towards its start, measured at
+  // the volume's centre and half its diagonal's share of an axis.
+  const auto prior_of = [&](std::size_t k) {
+    PosePrior<S> p;
+    const Vec3<S> extent = map.objects[k]->volume().view().extent();
+    p.centre = S(0.5) * extent;
+    p.radius = S(0.5) * emfusion::norm(extent) / std::sqrt(S(3));
+    p.weight = params.object_pose_prior;
+    return p;
+  };
   const auto volume_starts = [&](std::size_t k) {
     const PoseStarts<S> from = starts ? (*starts)[k] : PoseStarts<S>{map.objects[k]->pose(), std::nullopt};
     PoseStarts<S> in{in_volume(k, from.previous), std::nullopt};
@@ -431,6 +450,7 @@ std::vector<PoseTrack> track_objects(Map<S, B>& map, const Frame<S, B>& frame, c
     std::vector<Terms> terms;
     std::vector<decltype(scaled_norm(norm, S(1)))> norms;
     std::vector<PoseStarts<S>> from, in;
+    std::vector<PosePrior<S>> priors;
     // Every object's box of associated pixels in one reduction (on a GPU
     // one wait, not one an object).
     std::vector<const Image<S, B>*> associations;
@@ -444,6 +464,7 @@ std::vector<PoseTrack> track_objects(Map<S, B>& map, const Frame<S, B>& frame, c
       norms.push_back(scaled_norm(norm, volume.voxel_size()));
       const auto world_and_volume = volume_starts(solved[j]);
       from.push_back(world_and_volume.first), in.push_back(world_and_volume.second);
+      priors.push_back(prior_of(solved[j]));
     }
     std::vector<PoseTrack> batch(m);
     const std::vector<SE3<S>> T_volume_camera =
@@ -451,7 +472,7 @@ std::vector<PoseTrack> track_objects(Map<S, B>& map, const Frame<S, B>& frame, c
                : track_in_volumes(
                      backend, terms, norms, in, align, solver, params.retry_tracking,
                      [&](std::size_t j, const SE3<S>& T_vc, PoseTrack& t) { judge(solved[j], from[j], T_vc, t); },
-                     batch, ws.object_batch);
+                     batch, ws.object_batch, &priors);
     for (std::size_t j = 0; j < m; ++j) {
       tracks[solved[j]] = batch[j];
       if (batch[j].outcome == TrackingOutcome::tracked)
@@ -465,10 +486,12 @@ std::vector<PoseTrack> track_objects(Map<S, B>& map, const Frame<S, B>& frame, c
       const PoseStarts<S>& from = starts_k.first;
       const PoseStarts<S>& in = starts_k.second;
       const ObjectModel<S, B>& o = *map.objects[k];
+      const PosePrior<S> prior = prior_of(k);
       const SE3<S> T_volume_camera = track_in_volume(
           o.volume(), frame.points, &frame.associations.image(int(k) + 1), in,
           scaled_norm(norm, o.volume().voxel_size()), align, solver, params.retry_tracking,
-          [&](const SE3<S>& T_vc, PoseTrack& t) { judge(k, from, T_vc, t); }, tracks[k], ws.object_caches[k], run_on);
+          [&](const SE3<S>& T_vc, PoseTrack& t) { judge(k, from, T_vc, t); }, tracks[k], ws.object_caches[k], run_on,
+          &prior);
       if (tracks[k].outcome == TrackingOutcome::tracked) T_world_object[k] = to_world(k, T_volume_camera);
     };
     if (ConcurrentLanes<B>::concurrent && solved.size() > 1) {

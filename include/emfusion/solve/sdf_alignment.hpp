@@ -31,6 +31,7 @@
 #include "emfusion/robust/norms.hpp"
 #include "emfusion/solve/batched_solve.hpp"
 #include "emfusion/solve/normal_equations.hpp"
+#include "emfusion/solve/pose_prior.hpp"
 #include "emfusion/solve/solvers.hpp"
 #include "emfusion/solve/volume_parameter.hpp"
 #include "emfusion/volume/intensity_grid.hpp"
@@ -405,14 +406,16 @@ Solver solver_at_level(const Solver& solver, int level, int levels) {
 /// Minimises the robust cost of `terms` with `solver` from `start`, coarse to
 /// fine over params.pyramid_levels levels (coarse_to_fine); the levels below
 /// the coarsest start where it stopped, with refined(solver). `values` is
-/// reset for every level (the terms change with it).
+/// reset for every level (the terms change with it). With `prior`, every
+/// level's terms take its six (WithPosePrior, solve/pose_prior.hpp).
 template <class S, Backend B, class Volume, class Norm, class Solver>
-  requires RobustNorm<Norm, S> && PoseSolver<Solver, S>
-SE3<S> solve_coarse_to_fine(const B& backend, const SdfAlignmentTerms<S, Volume>& terms, const Norm& norm,
-                            const SdfAlignmentParams<S>& params, const Solver& solver, const SE3<S>& start,
-                            SolveReport* report, LinearizationCache<S, B>& values) {
+requires RobustNorm<Norm, S> && PoseSolver<Solver, S> SE3<S> solve_coarse_to_fine(
+    const B& backend, const SdfAlignmentTerms<S, Volume>& terms, const Norm& norm, const SdfAlignmentParams<S>& params,
+    const Solver& solver, const SE3<S>& start, SolveReport* report, LinearizationCache<S, B>& values,
+    const PosePrior<S>* prior = nullptr) {
   return coarse_to_fine(params.pyramid_levels, start, report, [&](int level, const SE3<S>& from, SolveReport& r) {
-    const SdfAlignmentTerms<S, Volume> level_terms = at_level(terms, params, level);
+    const WithPosePrior<SdfAlignmentTerms<S, Volume>, S> level_terms{at_level(terms, params, level),
+                                                                     prior ? *prior : PosePrior<S>{}};
     values.reset();
     const auto lin = [&](const SE3<S>& pose, const SE3<S>* reference) {
       return linearize(backend, level_terms, norm, pose, reference, values);
@@ -425,19 +428,21 @@ SE3<S> solve_coarse_to_fine(const B& backend, const SdfAlignmentTerms<S, Volume>
 /// (solve_batch): level by level, every problem's terms at that level in one
 /// batch, each starting where its coarser level stopped (or, without a
 /// solution there, where that level started). Fills one report per problem
-/// as solve_coarse_to_fine does.
+/// as solve_coarse_to_fine does; with `priors` (one per problem), each
+/// problem's terms take its prior's six at every level.
 template <class S, Backend B, class Volume, class Norm>
-  requires RobustNorm<Norm, S>
-std::vector<SE3<S>> solve_coarse_to_fine_batch(const B& backend, const std::vector<SdfAlignmentTerms<S, Volume>>& terms,
-                                               const std::vector<Norm>& norms, const SdfAlignmentParams<S>& params,
-                                               const LevenbergMarquardt& solver, std::vector<SE3<S>> starts,
-                                               std::vector<SolveReport>& reports, BatchedSolveWorkspace<S, B>& ws) {
+requires RobustNorm<Norm, S> std::vector<SE3<S>> solve_coarse_to_fine_batch(
+    const B& backend, const std::vector<SdfAlignmentTerms<S, Volume>>& terms, const std::vector<Norm>& norms,
+    const SdfAlignmentParams<S>& params, const LevenbergMarquardt& solver, std::vector<SE3<S>> starts,
+    std::vector<SolveReport>& reports, BatchedSolveWorkspace<S, B>& ws,
+    const std::vector<PosePrior<S>>* priors = nullptr) {
   const std::size_t n = terms.size();
-  detail::require(norms.size() == n && starts.size() == n, "solve_coarse_to_fine_batch",
-                  "need one norm and one start per problem");
-  std::vector<BatchedProblem<SdfAlignmentTerms<S, Volume>, Norm>> problems(n);
+  detail::require(norms.size() == n && starts.size() == n && (!priors || priors->size() == n),
+                  "solve_coarse_to_fine_batch", "need one norm, one start and (if any) one prior per problem");
+  std::vector<BatchedProblem<WithPosePrior<SdfAlignmentTerms<S, Volume>, S>, Norm>> problems(n);
   const auto batch_level = [&](int level, const std::vector<SE3<S>>& from, std::vector<SolveReport>& r) {
-    for (std::size_t k = 0; k < n; ++k) problems[k] = {at_level(terms[k], params, level), norms[k]};
+    for (std::size_t k = 0; k < n; ++k)
+      problems[k] = {{at_level(terms[k], params, level), priors ? (*priors)[k] : PosePrior<S>{}}, norms[k]};
     const LevenbergMarquardt level_solver = solver_at_level(solver, level, params.pyramid_levels);
     return solve_batch(backend, problems, from, level_solver.params, r, ws);
   };
