@@ -58,11 +58,12 @@ inline bool to_bool(const std::string& text, const char* name) {
   if (text == "false" || text == "0" || text == "off" || text == "no") return false;
   throw std::invalid_argument(std::string(name) + ": '" + text + "' is not true or false");
 }
-inline std::string print(double v) { return detail::tum::format(v); }
-/// A float as its shortest text that reads back as the same float ("0.04",
-/// not the widened double's "0.03999999910593033").
-inline std::string print(float v) {
-  char buffer[32];
+/// A float or double as its shortest text that reads back as the same
+/// value of its type ("0.04" for a float, not the widened double's
+/// "0.03999999910593033").
+template <class T>
+std::string print(T v) {
+  char buffer[64];
   const auto result = std::to_chars(buffer, buffer + sizeof(buffer), v);
   return std::string(buffer, result.ptr);
 }

@@ -139,17 +139,17 @@ struct PoseStarts {
 /// iteration after another through its Linearizer. With `prior`, each solve
 /// is pulled towards its start (the prior's pose is replaced by it).
 template <class S, Backend B, class Volume, class Norm, class Solver, class Judge>
-requires RobustNorm<Norm, S> && PoseSolver<Solver, S> SE3<S> track_terms(
-    const B& backend, const SdfAlignmentTerms<S, Volume>& terms, const PoseStarts<S>& starts, const Norm& norm,
-    const SdfAlignmentParams<S>& align, const Solver& solver, bool retry, Judge&& judge, PoseTrack& track,
-    LinearizationCache<S, B>& cache, const PosePrior<S>* prior = nullptr) {
+  requires RobustNorm<Norm, S> && PoseSolver<Solver, S>
+SE3<S> track_terms(const B& backend, const SdfAlignmentTerms<S, Volume>& terms, const PoseStarts<S>& starts,
+                   const Norm& norm, const SdfAlignmentParams<S>& align, const Solver& solver, bool retry,
+                   Judge&& judge, PoseTrack& track, LinearizationCache<S, B>& cache,
+                   const PosePrior<S>* prior = nullptr) {
   const bool predicted_first =
       starts.predicted && agrees_at_least_as_well(backend, terms, norm, align, *starts.predicted, starts.previous);
   const auto solve_from = [&](bool from_prediction, PoseTrack& t) {
     t.from_prediction = from_prediction;
     const SE3<S> start = from_prediction ? *starts.predicted : starts.previous;
-    PosePrior<S> pulled = prior ? *prior : PosePrior<S>{};
-    pulled.pose = start;
+    const PosePrior<S> pulled = (prior ? *prior : PosePrior<S>{}).towards(start);
     const SE3<S> T = solve_coarse_to_fine(backend, terms, norm, align, solver, start, &t.report, cache, &pulled);
     judge(T, t);
     return T;
@@ -169,10 +169,11 @@ requires RobustNorm<Norm, S> && PoseSolver<Solver, S> SE3<S> track_terms(
 /// `volume` (dense or sparse) weighted by `association`, over the box of
 /// its positive pixels.
 template <class S, Backend B, class Volume, class Norm, class Solver, class Judge>
-requires TsdfVolumeOn<Volume, S, B> && RobustNorm<Norm, S> && PoseSolver<Solver, S> SE3<S> track_in_volume(
-    const Volume& volume, const Image<Vec3<S>, B>& points, const Image<S, B>* association, const PoseStarts<S>& starts,
-    const Norm& norm, const SdfAlignmentParams<S>& align, const Solver& solver, bool retry, Judge&& judge,
-    PoseTrack& track, LinearizationCache<S, B>& cache, const B& backend, const PosePrior<S>* prior = nullptr) {
+  requires TsdfVolumeOn<Volume, S, B> && RobustNorm<Norm, S> && PoseSolver<Solver, S>
+SE3<S> track_in_volume(const Volume& volume, const Image<Vec3<S>, B>& points, const Image<S, B>* association,
+                       const PoseStarts<S>& starts, const Norm& norm, const SdfAlignmentParams<S>& align,
+                       const Solver& solver, bool retry, Judge&& judge, PoseTrack& track,
+                       LinearizationCache<S, B>& cache, const B& backend, const PosePrior<S>* prior = nullptr) {
   return track_terms(backend, sdf_alignment_in_box(volume, points, association, align, backend), starts, norm, align,
                      solver, retry, std::forward<Judge>(judge), track, cache, prior);
 }
@@ -187,11 +188,12 @@ requires TsdfVolumeOn<Volume, S, B> && RobustNorm<Norm, S> && PoseSolver<Solver,
 /// problem), each solve is pulled towards its start (each prior's pose is
 /// replaced by it).
 template <class S, Backend B, class Volume, class Norm, class Judge>
-requires RobustNorm<Norm, S> std::vector<SE3<S>> track_in_volumes(
-    const B& backend, const std::vector<SdfAlignmentTerms<S, Volume>>& terms, const std::vector<Norm>& norms,
-    const std::vector<PoseStarts<S>>& starts, const SdfAlignmentParams<S>& align, const LevenbergMarquardt& solver,
-    bool retry, Judge&& judge, std::vector<PoseTrack>& tracks, BatchedSolveWorkspace<S, B>& ws,
-    const std::vector<PosePrior<S>>* priors = nullptr) {
+  requires RobustNorm<Norm, S>
+std::vector<SE3<S>> track_in_volumes(const B& backend, const std::vector<SdfAlignmentTerms<S, Volume>>& terms,
+                                     const std::vector<Norm>& norms, const std::vector<PoseStarts<S>>& starts,
+                                     const SdfAlignmentParams<S>& align, const LevenbergMarquardt& solver, bool retry,
+                                     Judge&& judge, std::vector<PoseTrack>& tracks, BatchedSolveWorkspace<S, B>& ws,
+                                     const std::vector<PosePrior<S>>* priors = nullptr) {
   using Terms = SdfAlignmentTerms<S, Volume>;
   const std::size_t n = terms.size();
   detail::require(!priors || priors->size() == n, "track_in_volumes", "need one prior per problem");
@@ -225,8 +227,7 @@ requires RobustNorm<Norm, S> std::vector<SE3<S>> track_in_volumes(
       t[k].from_prediction = from_prediction(k);
       some_terms.push_back(terms[k]), some_norms.push_back(norms[k]);
       from.push_back(t[k].from_prediction ? *starts[k].predicted : starts[k].previous);
-      pulled.push_back(priors ? (*priors)[k] : PosePrior<S>{});
-      pulled.back().pose = from.back();
+      pulled.push_back((priors ? (*priors)[k] : PosePrior<S>{}).towards(from.back()));
     }
     std::vector<SolveReport> reports;
     const std::vector<SE3<S>> solved =

@@ -24,6 +24,13 @@ struct PosePrior {
   Vec3<S> centre{};  ///< c: the point whose displacement counts (the problem's frame)
   S radius = S(0);   ///< metres a rotation is measured at (rotation residual = radius x angle)
   S weight = S(0);   ///< fixed weight of each of the six terms; 0: no prior
+
+  /// The same prior pulling towards `P`.
+  PosePrior towards(const SE3<S>& P) const {
+    PosePrior p = *this;
+    p.pose = P;
+    return p;
+  }
 };
 
 /// `terms` with a PosePrior's six terms after its own (none with weight 0).
@@ -35,6 +42,9 @@ struct WithPosePrior {
   EMF_HD int term_count() const { return terms.term_count() + (prior.weight > S(0) ? 6 : 0); }
 
   EMF_HD bool term(int i, const SE3<S>& T, S& r, Vec6<S>& J, S& w) const {
+    // Without a prior (the camera, objects by default) the terms' own call
+    // alone: counting them again per term would repeat their grid's divisions.
+    if (!(prior.weight > S(0))) return terms.term(i, T, r, J, w);
     const int n = terms.term_count();
     if (i < n) return terms.term(i, T, r, J, w);
     const int k = i - n;

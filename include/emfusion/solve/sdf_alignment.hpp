@@ -409,10 +409,11 @@ Solver solver_at_level(const Solver& solver, int level, int levels) {
 /// reset for every level (the terms change with it). With `prior`, every
 /// level's terms take its six (WithPosePrior, solve/pose_prior.hpp).
 template <class S, Backend B, class Volume, class Norm, class Solver>
-requires RobustNorm<Norm, S> && PoseSolver<Solver, S> SE3<S> solve_coarse_to_fine(
-    const B& backend, const SdfAlignmentTerms<S, Volume>& terms, const Norm& norm, const SdfAlignmentParams<S>& params,
-    const Solver& solver, const SE3<S>& start, SolveReport* report, LinearizationCache<S, B>& values,
-    const PosePrior<S>* prior = nullptr) {
+  requires RobustNorm<Norm, S> && PoseSolver<Solver, S>
+SE3<S> solve_coarse_to_fine(const B& backend, const SdfAlignmentTerms<S, Volume>& terms, const Norm& norm,
+                            const SdfAlignmentParams<S>& params, const Solver& solver, const SE3<S>& start,
+                            SolveReport* report, LinearizationCache<S, B>& values,
+                            const PosePrior<S>* prior = nullptr) {
   return coarse_to_fine(params.pyramid_levels, start, report, [&](int level, const SE3<S>& from, SolveReport& r) {
     const WithPosePrior<SdfAlignmentTerms<S, Volume>, S> level_terms{at_level(terms, params, level),
                                                                      prior ? *prior : PosePrior<S>{}};
@@ -431,11 +432,12 @@ requires RobustNorm<Norm, S> && PoseSolver<Solver, S> SE3<S> solve_coarse_to_fin
 /// as solve_coarse_to_fine does; with `priors` (one per problem), each
 /// problem's terms take its prior's six at every level.
 template <class S, Backend B, class Volume, class Norm>
-requires RobustNorm<Norm, S> std::vector<SE3<S>> solve_coarse_to_fine_batch(
-    const B& backend, const std::vector<SdfAlignmentTerms<S, Volume>>& terms, const std::vector<Norm>& norms,
-    const SdfAlignmentParams<S>& params, const LevenbergMarquardt& solver, std::vector<SE3<S>> starts,
-    std::vector<SolveReport>& reports, BatchedSolveWorkspace<S, B>& ws,
-    const std::vector<PosePrior<S>>* priors = nullptr) {
+  requires RobustNorm<Norm, S>
+std::vector<SE3<S>> solve_coarse_to_fine_batch(const B& backend, const std::vector<SdfAlignmentTerms<S, Volume>>& terms,
+                                               const std::vector<Norm>& norms, const SdfAlignmentParams<S>& params,
+                                               const LevenbergMarquardt& solver, std::vector<SE3<S>> starts,
+                                               std::vector<SolveReport>& reports, BatchedSolveWorkspace<S, B>& ws,
+                                               const std::vector<PosePrior<S>>* priors = nullptr) {
   const std::size_t n = terms.size();
   detail::require(norms.size() == n && starts.size() == n && (!priors || priors->size() == n),
                   "solve_coarse_to_fine_batch", "need one norm, one start and (if any) one prior per problem");
