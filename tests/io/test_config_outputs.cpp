@@ -80,6 +80,10 @@ TEST_CASE("Bad config files name the file, the line and the problem", "[io]") {
   CHECK(contains(e, "b.conf"));
   CHECK(contains(e, "object_pose_prior must not be negative"));
   p = SystemParams<float>{};
+  e = bad("reidentify_pose_prior = -0.5\n");
+  CHECK(contains(e, "b.conf"));
+  CHECK(contains(e, "reidentify_pose_prior must not be negative"));
+  p = SystemParams<float>{};
   e = bad("background_unowned_free_from = 2\n");
   CHECK(contains(e, "b.conf"));
   CHECK(contains(e, "background_unowned_free_from must be in [0, 1]"));

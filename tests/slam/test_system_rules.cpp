@@ -753,6 +753,30 @@ TEMPLATE_LIST_TEST_CASE("A lost object is fitted first from its last pose, and o
     CHECK(fit(box, moved, there, 8).first > 0.9);
     CHECK(fit(box, moved, there, 0).first > 0.9);  // 0: not a lost object, no bound
   }
+  SECTION(
+      "reidentify_pose_prior pulls each fit towards its start: a weak pull follows the points, a strong one holds") {
+    const auto box_at = [](S x) { return SE3<S>(so3_exp(vec3(S(0.2), S(0.4), S(0))), vec3(x, S(0), S(1.2))); };
+    const Vec3<S> half = vec3(S(0.15), S(0.1), S(0.12));
+    std::vector<S> here, there;
+    const ObjectModel<S, B> box = model_of(frame_of(box_at(S(0)), half, here), here);
+    const Frame<S, B> moved = frame_of(box_at(S(0.06)), half, there);
+    const auto target = target_of(moved, there);
+    const SE3<S> last_seen = box.volume().pose().inverse();
+    const auto fit_with = [&](S prior) {
+      params.reidentify_pose_prior = prior;
+      return detail::reidentification::fit_from(box, target, moved, SE3<S>::identity(), params,
+                                                HuberNorm<S>{params.huber_voxels}, LevenbergMarquardt{params.lm}, 0,
+                                                last_seen);
+    };
+    const auto free = fit_with(S(0)), weak = fit_with(S(30)), strong = fit_with(S(1e7));
+    REQUIRE(free);
+    REQUIRE(weak);
+    CHECK(std::fabs(moved_by(box, free->second) - 0.06) < 0.005);
+    CHECK(std::fabs(moved_by(box, weak->second) - 0.06) < 0.005);  // 30 points' pull against thousands
+    CHECK(weak->first > 0.9);
+    if (strong) CHECK(moved_by(box, strong->second) < 0.01);  // held near where it was last
+    CHECK(!(strong && strong->first > 0.9));                  // and so not on the points
+  }
   SECTION("the solves of many starts in one batch: the fits of solving them one after another") {
     const auto box_at = [](S x) { return SE3<S>(so3_exp(vec3(S(0.2), S(0.4), S(0))), vec3(x, S(0), S(1.2))); };
     const Vec3<S> half = vec3(S(0.15), S(0.1), S(0.12));
@@ -768,6 +792,7 @@ TEMPLATE_LIST_TEST_CASE("A lost object is fitted first from its last pose, and o
     const LevenbergMarquardt lm{params.lm};
     const HuberNorm<S> huber{params.huber_voxels};
     int fits = 0, refused = 0;
+    params.reidentify_pose_prior = GENERATE(S(0), S(30));  // each solve with and without its pull
     for (const int frames_lost : {3, 0}) {  // 0: no bound on the move
       const auto batched = detail::reidentification::fits_from(box, target, moved, SE3<S>::identity(), params, huber,
                                                                lm, frames_lost, starts);

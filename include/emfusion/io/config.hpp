@@ -169,6 +169,8 @@ const std::vector<ParameterEntry<S>>& parameter_table() {
       EMF_NUMBER("reidentify_min_inliers", reidentify_min_inliers, "share of a detection on a lost object's surface"),
       EMF_NUMBER("reidentify_keep_margin", reidentify_keep_margin,
                  "share of a detection another fit must add to replace the fit from an object's last pose"),
+      EMF_NUMBER("reidentify_pose_prior", reidentify_pose_prior,
+                 "pull of each re-identification fit towards its start, in surface points per direction (0: off)"),
       EMF_NUMBER("reidentify_turn_below", reidentify_turn_below,
                  "a lost object's fit with a lower share of a detection on its surface, or not shown in view, is tried "
                  "turned too (0: off)"),

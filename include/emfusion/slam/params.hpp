@@ -180,6 +180,15 @@ struct SystemParams {
   /// turned; docs/system.md, "Lost objects"). 1: the last pose always wins
   /// when it fits; 0: the best fit wins.
   double reidentify_keep_margin = 0.05;
+  /// Every solve that fits a lost object to a detection or to a group of
+  /// unexplained pixels (and a merge's) pulled towards its start by six
+  /// terms of this weight, as object_pose_prior pulls tracking
+  /// (solve/pose_prior.hpp): what the points do not observe (a ball's
+  /// turn, a cylinder's slide along its axis) stays where the start put it
+  /// instead of drifting, and a fit a few frames after the loss is not
+  /// refused as a turn it cannot have made (docs/system.md, "Lost
+  /// objects"). 0: off.
+  S reidentify_pose_prior = S(0);
   /// When the best fit of a detection from a lost object's last
   /// orientation puts fewer than this share of its points on the surface,
   /// or is not shown in view (the model, drawn there, agrees with the
@@ -431,6 +440,7 @@ struct SystemParams {
                     "leaving_still_translation and leaving_still_rotation_degrees must not be negative");
     detail::require(reidentify_keep_margin >= 0 && reidentify_keep_margin <= 1, w,
                     "reidentify_keep_margin must be in [0, 1]");
+    detail::require(reidentify_pose_prior >= S(0), w, "reidentify_pose_prior must not be negative (0: off)");
     detail::require(reidentify_turn_below >= 0 && reidentify_turn_below <= 1, w,
                     "reidentify_turn_below must be in [0, 1]");
     detail::require(reidentify_turned_keep >= 0, w, "reidentify_turned_keep must not be negative (0: every start)");

@@ -32,6 +32,7 @@
 #include "emfusion/slam/map.hpp"
 #include "emfusion/slam/tracking.hpp"
 #include "emfusion/solve/batched_solve.hpp"
+#include "emfusion/solve/pose_prior.hpp"
 #include "emfusion/solve/sdf_alignment.hpp"
 #include "emfusion/volume/raycast.hpp"
 
@@ -208,7 +209,15 @@ auto surface_count_terms(const ObjectModel<S, B>& o, const DetectionTarget<S, B>
   return make_sdf_alignment(o.volume(), frame.points, &target.mask, count);
 }
 
-/// Object `o` aligned (`norm` in its voxels, `solver`) to the target's
+/// The pull of a fit of object `o` towards its start
+/// (params.reidentify_pose_prior; its pose is set per start).
+template <class S, Backend B>
+PosePrior<S> fit_prior(const ObjectModel<S, B>& o, const SystemParams<S>& params) {
+  return PosePrior<S>::in_box(o.volume().view().extent(), params.reidentify_pose_prior);
+}
+
+/// Object `o` aligned (`norm` in its voxels, `solver`, pulled towards
+/// `start` by params.reidentify_pose_prior) to the target's
 /// points from `start` (T_volume_camera): the share of the points within a
 /// Huber delta of its surface and the solved T_volume_camera; nothing when
 /// the solve may not be a fit (may_be_fit: no convergence, too few terms,
@@ -220,12 +229,16 @@ std::optional<std::pair<double, SE3<S>>> fit_from(const ObjectModel<S, B>& o, co
                                                   const SystemParams<S>& params, const Norm& norm,
                                                   const Solver& solver, int frames_lost, const SE3<S>& start) {
   const auto& volume = o.volume();
+  const B& backend = frame.points.backend();
   const SdfAlignmentParams<S> align = alignment_params(params, params.object_integration.max_weight);
+  const PosePrior<S> prior = fit_prior(o, params).towards(start);
   SolveReport report;
-  const SE3<S> T = align_in_volume(volume, frame.points, &target.mask, start, scaled_norm(norm, volume.voxel_size()),
-                                   align, solver, &report);
+  LinearizationCache<S, B> values;
+  const SE3<S> T =
+      solve_coarse_to_fine(backend, sdf_alignment_in_box(volume, frame.points, &target.mask, align, backend),
+                           scaled_norm(norm, volume.voxel_size()), align, solver, start, &report, values, &prior);
   if (!may_be_fit(o, report, T, T_world_camera, params, frames_lost)) return std::nullopt;
-  const NormalEquations6 n = linearize(frame.points.backend(), surface_count_terms(o, target, frame, params),
+  const NormalEquations6 n = linearize(backend, surface_count_terms(o, target, frame, params),
                                        OffSurfaceCount<S>{params.huber_voxels * volume.voxel_size()}, T);
   return std::pair{(n.terms - n.cost) / double(target.points), T};
 }
@@ -256,8 +269,10 @@ std::vector<std::optional<std::pair<double, SE3<S>>>> fits_from(const ObjectMode
     const auto scaled = scaled_norm(norm, volume.voxel_size());
     BatchedSolveWorkspace<S, B> ws;
     std::vector<SolveReport> reports;
+    std::vector<PosePrior<S>> priors;
+    for (const SE3<S>& start : starts) priors.push_back(fit_prior(o, params).towards(start));
     const std::vector<SE3<S>> T = solve_coarse_to_fine_batch(backend, std::vector(n, terms), std::vector(n, scaled),
-                                                             align, solver, starts, reports, ws);
+                                                             align, solver, starts, reports, ws, &priors);
     using Count = BatchedProblem<decltype(surface_count_terms(o, target, frame, params)), OffSurfaceCount<S>>;
     const Count count{surface_count_terms(o, target, frame, params),
                       OffSurfaceCount<S>{params.huber_voxels * volume.voxel_size()}};

@@ -410,12 +410,7 @@ std::vector<PoseTrack> track_objects(Map<S, B>& map, const Frame<S, B>& frame, c
   // object_pose_prior: each solve pulled towards its start, measured at
   // the volume's centre and half its diagonal's share of an axis.
   const auto prior_of = [&](std::size_t k) {
-    PosePrior<S> p;
-    const Vec3<S> extent = map.objects[k]->volume().view().extent();
-    p.centre = S(0.5) * extent;
-    p.radius = S(0.5) * emfusion::norm(extent) / std::sqrt(S(3));
-    p.weight = params.object_pose_prior;
-    return p;
+    return PosePrior<S>::in_box(map.objects[k]->volume().view().extent(), params.object_pose_prior);
   };
   const auto volume_starts = [&](std::size_t k) {
     const PoseStarts<S> from = starts ? (*starts)[k] : PoseStarts<S>{map.objects[k]->pose(), std::nullopt};

@@ -12,6 +12,8 @@
 // observed.
 #pragma once
 
+#include <cmath>
+
 #include "emfusion/core/host_device.hpp"
 #include "emfusion/core/math.hpp"
 #include "emfusion/core/se3.hpp"
@@ -24,6 +26,18 @@ struct PosePrior {
   Vec3<S> centre{};  ///< c: the point whose displacement counts (the problem's frame)
   S radius = S(0);   ///< metres a rotation is measured at (rotation residual = radius x angle)
   S weight = S(0);   ///< fixed weight of each of the six terms; 0: no prior
+
+  /// A prior of weight `weight` for a problem in a box [0, extent] (an
+  /// object's volume): measured at the box's centre, a rotation at half
+  /// the box's diagonal over sqrt(3) (its mean half side); the pose is set
+  /// by towards().
+  static PosePrior in_box(const Vec3<S>& extent, S weight) {
+    PosePrior p;
+    p.centre = S(0.5) * extent;
+    p.radius = S(0.5) * norm(extent) / std::sqrt(S(3));
+    p.weight = weight;
+    return p;
+  }
 
   /// The same prior pulling towards `P`.
   PosePrior towards(const SE3<S>& P) const {
