@@ -722,6 +722,24 @@ TEMPLATE_LIST_TEST_CASE("A lost object is fitted first from its last pose, and o
   const auto moved_by = [&](const ObjectModel<S, B>& o, const SE3<S>& T_volume_camera) {
     return double(norm(T_volume_camera.inverse().translation() - o.volume().pose().translation()));
   };
+  // A box fused where it was last seen, and a frame of it moved 6 cm along x.
+  struct MovedBox {
+    ObjectModel<S, B> box;
+    Frame<S, B> moved;
+    std::vector<S> there;  // its mask in that frame
+    detail::reidentification::DetectionTarget<S, B> target;
+    SE3<S> last_seen;  // T_volume_camera where it was last (the camera at the world origin)
+  };
+  const auto moved_box = [&] {
+    const auto box_at = [](S x) { return SE3<S>(so3_exp(vec3(S(0.2), S(0.4), S(0))), vec3(x, S(0), S(1.2))); };
+    const Vec3<S> half = vec3(S(0.15), S(0.1), S(0.12));
+    std::vector<S> here, there;
+    ObjectModel<S, B> box = model_of(frame_of(box_at(S(0)), half, here), here);
+    Frame<S, B> moved = frame_of(box_at(S(0.06)), half, there);
+    auto target = target_of(moved, there);
+    const SE3<S> last_seen = box.volume().pose().inverse();
+    return MovedBox{std::move(box), std::move(moved), std::move(there), std::move(target), last_seen};
+  };
   SECTION("a patch of a flat panel where it was: the fit from the last pose is kept, not a slid one") {
     // The detection is a patch of the panel's face off its centre: the
     // model fits it as well slid along the face (the starts at the patch's
@@ -740,66 +758,50 @@ TEMPLATE_LIST_TEST_CASE("A lost object is fitted first from its last pose, and o
     CHECK(moved_by(panel, T) < 0.005);
   }
   SECTION("a box detected 6 cm away: found within the bound, refused beyond it") {
-    const auto box_at = [](S x) { return SE3<S>(so3_exp(vec3(S(0.2), S(0.4), S(0))), vec3(x, S(0), S(1.2))); };
-    const Vec3<S> half = vec3(S(0.15), S(0.1), S(0.12));
-    std::vector<S> here, there;
-    const ObjectModel<S, B> box = model_of(frame_of(box_at(S(0)), half, here), here);
-    const Frame<S, B> moved = frame_of(box_at(S(0.06)), half, there);
-    const auto [inliers, T] = fit(box, moved, there, 1);
+    const MovedBox m = moved_box();
+    const auto [inliers, T] = fit(m.box, m.moved, m.there, 1);
     CHECK(inliers > 0.9);
-    CHECK(std::fabs(moved_by(box, T) - 0.06) < 0.01);
+    CHECK(std::fabs(moved_by(m.box, T) - 0.06) < 0.01);
     params.max_object_motion.translation = S(0.01);  // 1 cm a frame: 6 cm takes more than 5 frames
-    CHECK(fit(box, moved, there, 3).first == 0);
-    CHECK(fit(box, moved, there, 8).first > 0.9);
-    CHECK(fit(box, moved, there, 0).first > 0.9);  // 0: not a lost object, no bound
+    CHECK(fit(m.box, m.moved, m.there, 3).first == 0);
+    CHECK(fit(m.box, m.moved, m.there, 8).first > 0.9);
+    CHECK(fit(m.box, m.moved, m.there, 0).first > 0.9);  // 0: not a lost object, no bound
   }
   SECTION(
       "reidentify_pose_prior pulls each fit towards its start: a weak pull follows the points, a strong one holds") {
-    const auto box_at = [](S x) { return SE3<S>(so3_exp(vec3(S(0.2), S(0.4), S(0))), vec3(x, S(0), S(1.2))); };
-    const Vec3<S> half = vec3(S(0.15), S(0.1), S(0.12));
-    std::vector<S> here, there;
-    const ObjectModel<S, B> box = model_of(frame_of(box_at(S(0)), half, here), here);
-    const Frame<S, B> moved = frame_of(box_at(S(0.06)), half, there);
-    const auto target = target_of(moved, there);
-    const SE3<S> last_seen = box.volume().pose().inverse();
+    const MovedBox m = moved_box();
     const auto fit_with = [&](S prior) {
       params.reidentify_pose_prior = prior;
-      return detail::reidentification::fit_from(box, target, moved, SE3<S>::identity(), params,
+      return detail::reidentification::fit_from(m.box, m.target, m.moved, SE3<S>::identity(), params,
                                                 HuberNorm<S>{params.huber_voxels}, LevenbergMarquardt{params.lm}, 0,
-                                                last_seen);
+                                                m.last_seen);
     };
     const auto free = fit_with(S(0)), weak = fit_with(S(30)), strong = fit_with(S(1e7));
     REQUIRE(free);
     REQUIRE(weak);
-    CHECK(std::fabs(moved_by(box, free->second) - 0.06) < 0.005);
-    CHECK(std::fabs(moved_by(box, weak->second) - 0.06) < 0.005);  // 30 points' pull against thousands
+    CHECK(std::fabs(moved_by(m.box, free->second) - 0.06) < 0.005);
+    CHECK(std::fabs(moved_by(m.box, weak->second) - 0.06) < 0.005);  // 30 points' pull against thousands
     CHECK(weak->first > 0.9);
-    if (strong) CHECK(moved_by(box, strong->second) < 0.01);  // held near where it was last
+    if (strong) CHECK(moved_by(m.box, strong->second) < 0.01);  // held near where it was last
     CHECK(!(strong && strong->first > 0.9));                  // and so not on the points
   }
   SECTION("the solves of many starts in one batch: the fits of solving them one after another") {
-    const auto box_at = [](S x) { return SE3<S>(so3_exp(vec3(S(0.2), S(0.4), S(0))), vec3(x, S(0), S(1.2))); };
-    const Vec3<S> half = vec3(S(0.15), S(0.1), S(0.12));
-    std::vector<S> here, there;
-    const ObjectModel<S, B> box = model_of(frame_of(box_at(S(0)), half, here), here);
-    const Frame<S, B> moved = frame_of(box_at(S(0.06)), half, there);
-    const auto target = target_of(moved, there);
-    const SE3<S> last_seen = box.volume().pose().inverse();
-    std::vector<SE3<S>> starts{last_seen};
+    const MovedBox m = moved_box();
+    std::vector<SE3<S>> starts{m.last_seen};
     for (const Mat3<S>& turn : detail::reidentification::cube_turns<S>())
-      starts.push_back(detail::reidentification::start_at_target(box, target, last_seen.rotation(), turn, 1));
+      starts.push_back(detail::reidentification::start_at_target(m.box, m.target, m.last_seen.rotation(), turn, 1));
     params.max_object_motion.translation = S(0.02);  // some starts' solves go further than 3 frames allow
     const LevenbergMarquardt lm{params.lm};
     const HuberNorm<S> huber{params.huber_voxels};
     int fits = 0, refused = 0;
     params.reidentify_pose_prior = GENERATE(S(0), S(30));  // each solve with and without its pull
     for (const int frames_lost : {3, 0}) {  // 0: no bound on the move
-      const auto batched = detail::reidentification::fits_from(box, target, moved, SE3<S>::identity(), params, huber,
-                                                               lm, frames_lost, starts);
+      const auto batched = detail::reidentification::fits_from(m.box, m.target, m.moved, SE3<S>::identity(), params,
+                                                               huber, lm, frames_lost, starts);
       REQUIRE(batched.size() == starts.size());
       for (std::size_t k = 0; k < starts.size(); ++k) {
-        const auto single = detail::reidentification::fit_from(box, target, moved, SE3<S>::identity(), params, huber,
-                                                               lm, frames_lost, starts[k]);
+        const auto single = detail::reidentification::fit_from(m.box, m.target, m.moved, SE3<S>::identity(), params,
+                                                               huber, lm, frames_lost, starts[k]);
         INFO("start " << k << ", lost " << frames_lost << " frames");
         REQUIRE(bool(batched[k]) == bool(single));
         if (!single) {
