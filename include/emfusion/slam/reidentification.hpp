@@ -229,16 +229,14 @@ std::optional<std::pair<double, SE3<S>>> fit_from(const ObjectModel<S, B>& o, co
                                                   const SystemParams<S>& params, const Norm& norm,
                                                   const Solver& solver, int frames_lost, const SE3<S>& start) {
   const auto& volume = o.volume();
-  const B& backend = frame.points.backend();
   const SdfAlignmentParams<S> align = alignment_params(params, params.object_integration.max_weight);
   const PosePrior<S> prior = fit_prior(o, params).towards(start);
   SolveReport report;
   LinearizationCache<S, B> values;
-  const SE3<S> T =
-      solve_coarse_to_fine(backend, sdf_alignment_in_box(volume, frame.points, &target.mask, align, backend),
-                           scaled_norm(norm, volume.voxel_size()), align, solver, start, &report, values, &prior);
+  const SE3<S> T = align_in_volume(volume, frame.points, &target.mask, start, scaled_norm(norm, volume.voxel_size()),
+                                   align, solver, &report, &values, &volume.backend(), &prior);
   if (!may_be_fit(o, report, T, T_world_camera, params, frames_lost)) return std::nullopt;
-  const NormalEquations6 n = linearize(backend, surface_count_terms(o, target, frame, params),
+  const NormalEquations6 n = linearize(frame.points.backend(), surface_count_terms(o, target, frame, params),
                                        OffSurfaceCount<S>{params.huber_voxels * volume.voxel_size()}, T);
   return std::pair{(n.terms - n.cost) / double(target.points), T};
 }
@@ -269,8 +267,9 @@ std::vector<std::optional<std::pair<double, SE3<S>>>> fits_from(const ObjectMode
     const auto scaled = scaled_norm(norm, volume.voxel_size());
     BatchedSolveWorkspace<S, B> ws;
     std::vector<SolveReport> reports;
+    const PosePrior<S> prior = fit_prior(o, params);
     std::vector<PosePrior<S>> priors;
-    for (const SE3<S>& start : starts) priors.push_back(fit_prior(o, params).towards(start));
+    for (const SE3<S>& start : starts) priors.push_back(prior.towards(start));
     const std::vector<SE3<S>> T = solve_coarse_to_fine_batch(backend, std::vector(n, terms), std::vector(n, scaled),
                                                              align, solver, starts, reports, ws, &priors);
     using Count = BatchedProblem<decltype(surface_count_terms(o, target, frame, params)), OffSurfaceCount<S>>;

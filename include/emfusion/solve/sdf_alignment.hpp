@@ -483,17 +483,20 @@ bool agrees_at_least_as_well(const B& backend, const SdfAlignmentTerms<S, Volume
 /// their allocation (LinearizationCache); `run_on` (optional) is the backend
 /// the solve's work runs on instead of the volume's, e.g. a CUDA stream of
 /// its own so that solves from several host threads overlap
-/// (ConcurrentLanes). Each solve needs its own cache.
+/// (ConcurrentLanes). Each solve needs its own cache. With `prior`
+/// (optional), the solve is pulled towards the prior's pose
+/// (solve_coarse_to_fine, solve/pose_prior.hpp).
 template <class S, Backend B, class Volume, class Norm, class Solver>
   requires TsdfVolumeOn<Volume, S, B> && RobustNorm<Norm, S> && PoseSolver<Solver, S>
 SE3<S> align_in_volume(const Volume& volume, const Image<Vec3<S>, B>& points,
                        const Image<S, B>* association, const SE3<S>& T_volume_camera, const Norm& norm,
                        const SdfAlignmentParams<S>& params, const Solver& solver, SolveReport* report = nullptr,
-                       LinearizationCache<S, B>* cache = nullptr, const B* run_on = nullptr) {
+                       LinearizationCache<S, B>* cache = nullptr, const B* run_on = nullptr,
+                       const PosePrior<S>* prior = nullptr) {
   const B& backend = run_on ? *run_on : volume.backend();
   LinearizationCache<S, B> local;
   return solve_coarse_to_fine(backend, sdf_alignment_in_box(volume, points, association, params, backend), norm,
-                              params, solver, T_volume_camera, report, cache ? *cache : local);
+                              params, solver, T_volume_camera, report, cache ? *cache : local, prior);
 }
 
 /// align_in_volume with Levenberg-Marquardt of parameters `lm`.
