@@ -427,6 +427,58 @@ TEMPLATE_LIST_TEST_CASE("Sparse raycast: rays through unallocated space miss and
   CHECK(std::count(after_reset.begin(), after_reset.end(), std::uint8_t(1)) == 0);
 }
 
+TEMPLATE_TEST_CASE("Sparse raycast: the normal's samples one at a time are observed_gradient's", "[volume]", float,
+                   double) {
+  using S = TestType;
+  // A ball whose band of blocks ends close to its surface: about the blocks'
+  // edges some of a normal's samples are unobserved (one-sided differences,
+  // or no normal), as at the border of what a background has seen.
+  SparseTsdfVolume<S, Host> sparse(S(0.01), S(0.03), SE3<S>::identity(), 4096);
+  const SphereSdf<S> ball{vec3(S(0.003), S(-0.002), S(0.001)), S(0.2)};
+  fill_sparse(sparse, ball, Vec3i{{-4, -4, -4}}, Vec3i{{3, 3, 3}}, S(0.05));
+  const auto view = sparse.view();
+  std::size_t agree = 0, one_sided = 0, none = 0;
+  for (int k = 0; k < 4000; ++k) {
+    // Points on a spiral over the ball, from 4 cm inside to 4 cm outside.
+    const double z = 1.0 - 2.0 * (k + 0.5) / 4000.0, phi = 2.399963 * k, r = std::sqrt(1.0 - z * z);
+    const Vec3<S> dir = vec3(S(r * std::cos(phi)), S(r * std::sin(phi)), S(z));
+    const Vec3<S> p = ball.centre + (ball.radius + S(0.04 * std::sin(0.37 * k))) * dir;
+    Vec3<S> expected{};
+    const bool has_expected = detail::trilinear::observed_gradient(view, p, view.voxel_size, expected);
+    detail::NormalSamples<S> normal(view.voxel_size);
+    bool has = true;
+    for (normal.stage = 1; has && normal.stage <= detail::NormalSamples<S>::samples;) {
+      S f = S(0);
+      const bool observed = view.sample_observed(normal.point(p), f);
+      has = normal.take(observed, f);
+    }
+    INFO("point " << k);
+    REQUIRE(has == has_expected);
+    if (!has) {
+      ++none;
+      continue;
+    }
+    CHECK(normal.gradient.x() == expected.x());
+    CHECK(normal.gradient.y() == expected.y());
+    CHECK(normal.gradient.z() == expected.z());
+    // One-sided where a neighbour is unobserved: the sum of the six.
+    S f = S(0);
+    int observed = 0;
+    for (int a = 0; a < 3; ++a)
+      for (const S sign : {S(1), S(-1)}) {
+        Vec3<S> q = p;
+        q[a] += sign * view.voxel_size;
+        observed += view.sample_observed(q, f);
+      }
+    one_sided += observed < 6;
+    ++agree;
+  }
+  // All three kinds were met.
+  CHECK(agree > 1000);
+  CHECK(one_sided > 20);
+  CHECK(none > 20);
+}
+
 TEMPLATE_LIST_TEST_CASE("Sparse raycast of a scene 10 m from the origin", "[volume]", emfusion::test::HeavyConfigs) {
   using S = typename TestType::Scalar;
   using B = typename TestType::Backend;

@@ -250,6 +250,66 @@ inline constexpr int ray_cache_blocks = 1;
 inline constexpr int ray_cache_blocks = 4;
 #endif
 
+/// The samples of trilinear::observed_gradient at a point p taken one at a
+/// time, for a march that takes all its samples at one site
+/// (RaycastPixel::march_one_site): stage 1 samples p, stages 2 and 3 one
+/// voxel either side of it along x, 4 and 5 along y, 6 and 7 along z; after
+/// each axis's pair its component of `gradient`, computed exactly as
+/// observed_gradient computes it. Written without arrays indexed at run
+/// time, which a CUDA device would keep in local memory.
+template <class S>
+struct NormalSamples {
+  static constexpr int samples = 7;
+  int stage = 0;  // the next sample, 1..samples; 0: none begun
+  S vs;
+  bool has_centre = false, has_plus = false;
+  S centre = S(0), plus = S(0);
+  Vec3<S> gradient{};
+
+  EMF_HD explicit NormalSamples(S voxel_size) : vs(voxel_size) {}
+
+  /// Where the stage's sample is taken around p.
+  EMF_HD Vec3<S> point(const Vec3<S>& p) const {
+    if (stage == 1) return p;
+    const int a = (stage - 2) >> 1;
+    const S offset = (stage & 1) == 0 ? vs : -vs;
+    return Vec3<S>{a == 0 ? p.x() + offset : p.x(), a == 1 ? p.y() + offset : p.y(),
+                   a == 2 ? p.z() + offset : p.z()};
+  }
+
+  /// Takes the stage's sample (f where `observed`) and moves to the next
+  /// stage; false where an axis has no two observed samples (no normal).
+  EMF_HD bool take(bool observed, S f) {
+    const int s = stage++;
+    if (s == 1) {
+      has_centre = observed, centre = observed ? f : S(0);
+      return true;
+    }
+    if ((s & 1) == 0) {
+      has_plus = observed, plus = observed ? f : S(0);
+      return true;
+    }
+    S component;
+    if (has_plus && observed)
+      component = (plus - f) / (S(2) * vs);
+    else if (has_plus && has_centre)
+      component = (plus - centre) / vs;
+    else if (observed && has_centre)
+      component = (centre - f) / vs;
+    else
+      return false;
+    const int a = (s - 2) >> 1;
+    if (a == 0) {
+      gradient.x() = component;
+    } else if (a == 1) {
+      gradient.y() = component;
+    } else {
+      gradient.z() = component;
+    }
+    return true;
+  }
+};
+
 // ---- the march, written once -------------------------------------------------
 
 template <class S, class View>
@@ -369,13 +429,15 @@ struct RaycastPixel {
   }
 
   /// The march of a sparse volume, with one place that takes every sample:
-  /// the march's, and those that refine a crossing (refining = the
-  /// refinement's sample, 1.. Crossing::samples, 0 while marching). A warp
-  /// whose threads are at different stages then runs one copy of the
-  /// sampling code (eight block lookups): on the H100 the sparse kernel ran
-  /// 0.83 ms instead of 1.20 (0.58 instead of 0.80 through the index grid),
-  /// where the dense one, whose samples are cheap, ran 0.43 ms instead of
-  /// 0.37 and so keeps march_then_refine.
+  /// the march's, those that refine a crossing (refining = the
+  /// refinement's sample, 1.. Crossing::samples, 0 while marching) and
+  /// those of the normal at a drawn crossing (NormalSamples: stage 1..7,
+  /// 0 before). A warp whose threads are at different stages then runs one
+  /// copy of the sampling code (eight block lookups): on the H100 the
+  /// sparse kernel ran 0.83 ms instead of 1.20 (0.58 instead of 0.80
+  /// through the index grid) with the march's and the refinement's samples
+  /// at one site, where the dense one, whose samples are cheap, ran 0.43 ms
+  /// instead of 0.37 and so keeps march_then_refine.
   template <class Sampler>
   EMF_HD void march_one_site(Sampler& sampler, int i, const Vec3<S>& ray_cam, const Vec3<S>& origin,
                              const Vec3<S>& dir, S t, S t_end) const {
@@ -383,21 +445,37 @@ struct RaycastPixel {
     const int steps = max_steps(t, t_end);
     int k = 0, refining = 0;
     Crossing<S> c;
+    NormalSamples<S> normal(volume.voxel_size);
+    Vec3<S> p_hit{};
     S f_march = S(0);
     for (;;) {
-      if (refining == 0 && !(k < steps && t <= t_end)) break;
+      if (refining == 0 && normal.stage == 0 && !(k < steps && t <= t_end)) break;
       S f;
-      const bool observed = sampler.sample_observed(origin + (refining > 0 ? c.t : t) * dir, f);
+      const Vec3<S> p = normal.stage > 0 ? normal.point(p_hit) : origin + (refining > 0 ? c.t : t) * dir;
+      const bool observed = sampler.sample_observed(p, f);
+      if (normal.stage > 0) {
+        if (!normal.take(observed, f)) {
+          miss(i);
+          return;
+        }
+        if (normal.stage <= NormalSamples<S>::samples) continue;
+        write_surface(i, ray_cam, c.t, normal.gradient);
+        return;
+      }
       if (refining > 0) {
         if (observed && c.update(f) && refining < Crossing<S>::samples) {
           ++refining;
           continue;
         }
         refining = 0;
-        const Vec3<S> p_hit = origin + c.t * dir;
+        p_hit = origin + c.t * dir;
         if (drawn(p_hit)) {
-          write_hit(sampler, i, ray_cam, c.t, p_hit);
-          return;
+          if (!params.surface) {
+            write_depth(i, ray_cam, c.t);
+            return;
+          }
+          normal.stage = 1;
+          continue;
         }
         f = f_march;  // not drawn: the march goes on from its sample at t
       } else {
@@ -419,19 +497,20 @@ struct RaycastPixel {
     miss(i);
   }
 
-  template <class Sampler>
-  EMF_HD void write_hit(Sampler& sampler, int i, const Vec3<S>& ray_cam, S t, const Vec3<S>& p_volume) const {
-    Vec3<S> g;
-    const Vec3<S> vertex = t * ray_cam;
-    if (!params.surface) {
-      depth[i] = vertex.z();
-      hit[i] = 1;
-      return;
-    }
-    if (!sampler.observed_gradient(p_volume, g) || !(squared_norm(g) > S(0))) {
+  /// A hit at distance t along the ray (depth only).
+  EMF_HD void write_depth(int i, const Vec3<S>& ray_cam, S t) const {
+    depth[i] = (t * ray_cam).z();
+    hit[i] = 1;
+  }
+
+  /// A hit at distance t along the ray with the SDF gradient `g` there
+  /// (volume frame): depth, vertex and normal, or a miss where g is zero.
+  EMF_HD void write_surface(int i, const Vec3<S>& ray_cam, S t, const Vec3<S>& g) const {
+    if (!(squared_norm(g) > S(0))) {
       miss(i);
       return;
     }
+    const Vec3<S> vertex = t * ray_cam;
     // Rotate the gradient into the camera frame: R_camera_volume = R^T.
     Vec3<S> n = normalized(T_volume_camera.rotation().transpose() * g);
     if (dot(n, vertex) > S(0)) n = -n;
@@ -439,6 +518,22 @@ struct RaycastPixel {
     vertices[i] = vertex;
     normals[i] = n;
     hit[i] = 1;
+  }
+
+  /// A hit at distance t along the ray, at p_volume in the volume: its
+  /// normal from the sampler's observed_gradient.
+  template <class Sampler>
+  EMF_HD void write_hit(Sampler& sampler, int i, const Vec3<S>& ray_cam, S t, const Vec3<S>& p_volume) const {
+    if (!params.surface) {
+      write_depth(i, ray_cam, t);
+      return;
+    }
+    Vec3<S> g;
+    if (!sampler.observed_gradient(p_volume, g)) {
+      miss(i);
+      return;
+    }
+    write_surface(i, ray_cam, t, g);
   }
 };
 
