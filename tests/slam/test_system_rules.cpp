@@ -978,6 +978,20 @@ S box_x_at_border() {
   return x;
 }
 
+/// The box scene's first frame with the box at the right edge
+/// (box_x_at_border: `x`) detected as a cup: one young object, created with
+/// little of it inside the visibility border. `scale` as BoxScene's.
+template <class S, class B>
+struct YoungAtBorder {
+  S x = box_x_at_border<S>();
+  FirstFrame<S, B> first;
+  explicit YoungAtBorder(const SystemParams<S>& params, int scale = 1)
+      : first("cup", scale, params, vec3(x, S(0), S(1.2))) {
+    REQUIRE(x < S(0.9));
+    REQUIRE(first.result.created == std::vector<int>{1});
+  }
+};
+
 TEMPLATE_LIST_TEST_CASE("A new object at the image border survives until it is seen or the detector runs again",
                         "[slam]", emfusion::test::HeavyConfigs) {
   using S = typename TestType::Scalar;
@@ -985,16 +999,14 @@ TEMPLATE_LIST_TEST_CASE("A new object at the image border survives until it is s
   // A box at the right edge whose detection is large enough to create an
   // object (at least 100 px: 1600 at 640x480), but with fewer than 100 px
   // inside the 5 px visibility border: not "visible" by the deletion rule.
-  const S x = box_x_at_border<S>();
-  REQUIRE(x < S(0.9));
   for (const bool grace : {true, false}) {
+    INFO("grace " << grace);
     SystemParams<S> params = small_params<S>();
     params.young_object_grace = grace;
-    FirstFrame<S, B> first("cup", 1, params, vec3(x, S(0), S(1.2)));
+    YoungAtBorder<S, B> young(params);
+    FirstFrame<S, B>& first = young.first;
     System<S, B>& sys = first.system;
     const Image<S, B>& depth = first.depth;
-    INFO("grace " << grace);
-    REQUIRE(first.result.created == std::vector<int>{1});
     const FrameResult second = sys.process(depth, 1 / 30.0);
     REQUIRE(second.object_status.size() == 1);
     CHECK(second.object_status[0].visible_pixels < 100);  // 1600 px at 640x480 is 100 px at 160x120
@@ -1017,12 +1029,10 @@ TEMPLATE_LIST_TEST_CASE("A young object the frame no longer shows at all is lost
   // runs again: once the frame neither draws nor associates it on any
   // pixel inside the visibility border (or on min_object_terms pixels
   // anywhere), its grace ends and it is lost as not visible at once.
-  const S x = box_x_at_border<S>();
-  REQUIRE(x < S(0.9));
   const SystemParams<S> params = small_params<S>();
   REQUIRE(params.young_object_grace);
-  FirstFrame<S, B> first("cup", 1, params, vec3(x, S(0), S(1.2)));
-  REQUIRE(first.result.created == std::vector<int>{1});
+  YoungAtBorder<S, B> young(params);
+  FirstFrame<S, B>& first = young.first;
   const BoxScene<S>& scene = first.scene;
   System<S, B>& sys = first.system;
   int deleted_at = -1, gone_at = -1;  // gone: none of the box in the frame
@@ -1068,15 +1078,13 @@ TEMPLATE_LIST_TEST_CASE("A young object not yet visible keeps its pose; once see
   // the frame shows too little of it, and is tracked once enough shows; not
   // held, it is tracked from the first frame on. (How well it then follows
   // a box that enters the view at this size is not the question here.)
-  const S x = box_x_at_border<S>();
-  REQUIRE(x < S(0.9));
   for (const bool hold : {true, false}) {
     INFO("hold " << hold);
     SystemParams<S> params = small_params<S>();
     params.hold_unseen_objects = hold;
-    FirstFrame<S, B> first("cup", 1, params, vec3(x, S(0), S(1.2)));
-    REQUIRE(first.result.created == std::vector<int>{1});
-    System<S, B>& sys = first.system;
+    YoungAtBorder<S, B> young(params);
+    const S x = young.x;
+    System<S, B>& sys = young.first.system;
     const Vec3<S> found = sys.objects()[0]->pose().translation();
     int first_tracked = -1;
     for (int f = 1; f <= 24; ++f) {
@@ -1106,6 +1114,49 @@ TEMPLATE_LIST_TEST_CASE("A young object not yet visible keeps its pose; once see
       CHECK(first_tracked == 1);
     }
   }
+}
+
+TEMPLATE_LIST_TEST_CASE("A young object is not held where the frame sees through it", "[slam]",
+                        emfusion::test::HeavyConfigs) {
+  using S = typename TestType::Scalar;
+  using B = typename TestType::Backend;
+  // The box at the right edge, created from its detection with little of
+  // it inside the border: young, and held (hold_unseen_objects) while the
+  // E-step shows it cut by the border. It then moves away from the camera,
+  // 1.5 cm a frame: drawn where it was found, the model stands in front of
+  // what the frame measures there. Held so, it fell behind (held 4 frames,
+  // then tracked, 5.4 cm behind after 8 frames; on the generalisation
+  // benchmark a cup that came into view fell 1.3 -> 9.7 cm behind). Now the
+  // first frame that sees through it ends its grace: not visible, it is
+  // lost there, kept to be found again. At 320x240, where the box shows on
+  // more pixels than the min_object_terms that must see through it.
+  const SystemParams<S> params = small_params<S>();
+  REQUIRE(params.hold_unseen_objects);
+  YoungAtBorder<S, B> young(params, 2);
+  const S x = young.x;
+  System<S, B>& sys = young.first.system;
+  const Vec3<S> found = sys.objects()[0]->pose().translation();
+  const S step = S(0.015);
+  int lost_at = -1;
+  for (int f = 1; f <= 8 && lost_at < 0; ++f) {
+    const BoxScene<S> scene(vec3(x, S(0), S(1.2) + step * S(f)), 2);
+    const FrameResult r = sys.process(scene.template depth<B>(SE3<S>::identity()), f / 30.0);
+    REQUIRE(r.object_status.size() == 1);
+    if (!r.deleted.empty()) {
+      CHECK(r.deleted == std::vector<int>{1});
+      CHECK(r.object_status[0].deleted == DeletionReason::not_visible);
+      lost_at = f;
+    } else {
+      // Until then held where it was found.
+      CHECK(r.object_status[0].tracking == TrackingOutcome::not_tracked);
+      CHECK(sys.objects()[0]->pose().translation()[2] == found[2]);
+    }
+  }
+  INFO("lost at frame " << lost_at);
+  CHECK(lost_at > 0);
+  CHECK(lost_at <= 2);
+  CHECK(sys.objects().empty());
+  CHECK(sys.map().lost.size() == 1);
 }
 
 TEMPLATE_LIST_TEST_CASE("An object leaving the view keeps its pose instead of following what is left of it", "[slam]",

@@ -244,7 +244,11 @@ struct SystemParams {
   /// association inside the visibility border, and less there than in the
   /// border band, or fewer in all than min_object_terms) is not
   /// tracked: it keeps the pose it was found at instead of following the
-  /// few pixels left of it at the border.
+  /// few pixels left of it at the border. Where the frame sees through that
+  /// pose (of its model's pixels cast there, its outline left out, that no
+  /// nearer surface covers, at least min_object_terms and fewer than two
+  /// in three agree with the frame) it has moved on: its grace ends, and
+  /// it is lost unless visible.
   bool hold_unseen_objects = true;
   /// An object whose model, drawn at its last pose, covers at least
   /// keep_mask_pixels and is more often behind a nearer surface of the frame
