@@ -978,6 +978,8 @@ S box_x_at_border() {
   return x;
 }
 
+namespace {
+
 /// The box scene's first frame with the box at the right edge
 /// (box_x_at_border: `x`) detected as a cup: one young object, created with
 /// little of it inside the visibility border. `scale` as BoxScene's.
@@ -991,6 +993,8 @@ struct YoungAtBorder {
     REQUIRE(first.result.created == std::vector<int>{1});
   }
 };
+
+}  // namespace
 
 TEMPLATE_LIST_TEST_CASE("A new object at the image border survives until it is seen or the detector runs again",
                         "[slam]", emfusion::test::HeavyConfigs) {
