@@ -254,8 +254,8 @@ inline constexpr int ray_cache_blocks = 4;
 /// time, for a march that takes all its samples at one site
 /// (RaycastPixel::march_one_site): stage 1 samples p, stages 2 and 3 one
 /// voxel either side of it along x, 4 and 5 along y, 6 and 7 along z; after
-/// each axis's pair its component of `gradient`, computed exactly as
-/// observed_gradient computes it. Written without arrays indexed at run
+/// each axis's pair its component of `gradient`, by observed_gradient's
+/// own trilinear::observed_difference. Written without arrays indexed at run
 /// time, which a CUDA device would keep in local memory.
 template <class S>
 struct NormalSamples {
@@ -290,14 +290,7 @@ struct NormalSamples {
       return true;
     }
     S component;
-    if (has_plus && observed)
-      component = (plus - f) / (S(2) * vs);
-    else if (has_plus && has_centre)
-      component = (plus - centre) / vs;
-    else if (observed && has_centre)
-      component = (centre - f) / vs;
-    else
-      return false;
+    if (!trilinear::observed_difference(has_plus, plus, observed, f, has_centre, centre, vs, component)) return false;
     const int a = (s - 2) >> 1;
     if (a == 0) {
       gradient.x() = component;

@@ -102,6 +102,24 @@ EMF_HD bool central_gradient(Sampler& sampler, const Vec3<S>& p, S voxel_size, V
   return true;
 }
 
+/// One axis of observed_gradient from its samples one voxel (`voxel_size`)
+/// either side of a point and at it (each with whether it was observed):
+/// the central difference, else a one-sided one with the centre; false,
+/// `out` left alone, where the axis has no two observed samples.
+template <class S>
+EMF_HD bool observed_difference(bool has_plus, S plus, bool has_minus, S minus, bool has_centre, S centre,
+                                S voxel_size, S& out) {
+  if (has_plus && has_minus)
+    out = (plus - minus) / (S(2) * voxel_size);
+  else if (has_plus && has_centre)
+    out = (plus - centre) / voxel_size;
+  else if (has_minus && has_centre)
+    out = (centre - minus) / voxel_size;
+  else
+    return false;
+  return true;
+}
+
 /// Central differences one voxel apart of `sampler.sample_observed`,
 /// one-sided where one side is not observed: the normals of what rendering
 /// draws. False where an axis has no two observed samples.
@@ -116,13 +134,7 @@ EMF_HD bool observed_gradient(Sampler& sampler, const Vec3<S>& p, S voxel_size, 
     const bool has_plus = sampler.sample_observed(q, plus);
     q[a] = p[a] - voxel_size;
     const bool has_minus = sampler.sample_observed(q, minus);
-    if (has_plus && has_minus)
-      gradient[a] = (plus - minus) / (S(2) * voxel_size);
-    else if (has_plus && has_centre)
-      gradient[a] = (plus - centre) / voxel_size;
-    else if (has_minus && has_centre)
-      gradient[a] = (centre - minus) / voxel_size;
-    else
+    if (!observed_difference(has_plus, plus, has_minus, minus, has_centre, centre, voxel_size, gradient[a]))
       return false;
   }
   return true;
