@@ -85,6 +85,7 @@ if [[ -n "$nvcc_path" ]]; then
     -DEMFUSION_CUDA=ON \
     -DCMAKE_CUDA_COMPILER="$nvcc_path" \
     -DCMAKE_CUDA_ARCHITECTURES=90-virtual \
+    "-DCMAKE_CUDA_FLAGS=-Xcicc -O0" \
     -DCMAKE_CUDA_FLAGS_RELEASE=-DNDEBUG -DCMAKE_CXX_FLAGS_RELEASE=-DNDEBUG \
     -DCMAKE_BUILD_TYPE=Release \
     -DEMFUSION_WERROR=ON
@@ -97,8 +98,12 @@ if [[ -n "$nvcc_path" ]]; then
   # they run, on the GPU machine. 90-virtual: PTX only, no machine code (the
   # whole C++ and CUDA front end and NVVM, not ptxas): 222 s instead of 263 s
   # for the app's unit on this machine; the GPU machine builds sm_90 code.
-  # Host code unoptimised (no -O3 in the Release flags): a check that it
-  # compiles, not a build to run.
+  # Host code unoptimised (no -O3 in the Release flags) and device code too
+  # (-Xcicc -O0: NVVM still lowers every kernel to PTX, without its
+  # optimiser, which was nine tenths of the step: track_camera's unit took
+  # 412 s, its sparse volume's kernels alone 137 s of NVVM at -O3 against
+  # 11 s at -O0; the whole step 108 s instead of 412 s; docs/building.md):
+  # a check that it compiles, not a build to run.
   say "CUDA build: building emfusion_cuda_compile_check (emfusion_app track_camera) with -j${jobs}"
   cmake --build build-cuda -j "$jobs" --target emfusion_cuda_compile_check
   say "CUDA build: compiled emfusion_app and track_camera in build-cuda/ but did NOT run them (no GPU is assumed here)."
