@@ -600,9 +600,10 @@ void run(const RunOptions& o) {
     write_json_file((out / "run.json").string(), json);
   }
   // Colour asked for where there is none: say so once, and go on with depth.
-  if (system.params().object_colour_weight > S(0) && first < frames && !in.colour(first))
+  if (system.params().uses_colour() && first < frames && !in.colour(first))
     fmt::print(stderr,
-               "note: '{}' has no colour images: object_colour_weight is set, objects are tracked on depth alone\n",
+               "note: '{}' has no colour images: object_colour_weight or reidentify_colour_agreement is set, objects "
+               "are tracked and found again on depth alone\n",
                o.input);
   StreamedOutputs streams(o.output);
   FrameLog frame_log((out / "frames.csv").string(), resumed_frame_log(o.resume, first));
@@ -623,9 +624,10 @@ void run(const RunOptions& o) {
     const double t = in.timestamp(i);
     const Image<S, B> depth = in.depth(i).template to<B>(backend);
     const std::optional<Detections> det = in.detect(int(i), t);
-    // The objects' colour (object_colour_weight) takes the frame's gray values.
+    // The objects' colour (object_colour_weight, reidentify_colour_agreement)
+    // takes the frame's gray values.
     const std::optional<ColourImage> colour =
-        system.params().object_colour_weight > S(0) ? in.colour(i) : std::optional<ColourImage>{};
+        system.params().uses_colour() ? in.colour(i) : std::optional<ColourImage>{};
     Image<S, B> intensity;
     if (colour && (colour->width() != in.camera.width || colour->height() != in.camera.height))
       throw std::runtime_error("'" + o.input + "' frame " + std::to_string(i) + ": its colour image is " +

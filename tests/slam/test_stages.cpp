@@ -1306,3 +1306,88 @@ TEMPLATE_LIST_TEST_CASE("With object_colour_weight, objects take the frame's gra
   bad.object_colour_weight = S(-1);
   CHECK_THROWS_WITH(bad.validate(), EMF_CONTAINS("object_colour_weight must not be negative"));
 }
+
+TEMPLATE_LIST_TEST_CASE("With reidentify_colour_agreement, objects keep colour and a fit must agree with it",
+                        "[slam][colour]", emfusion::test::HeavyConfigs) {
+  using S = typename TestType::Scalar;
+  using B = typename TestType::Backend;
+  WallAndBox<S> s;
+  s.params.reidentify_colour_agreement = 0.8;
+  REQUIRE(s.params.uses_colour());
+  Image<int, Host> labels;
+  const Image<S, B> depth = s.template depth<B>(SE3<S>::identity(), &labels);
+  // The box's left half light and its right half dark (or the other way
+  // round: a part view of a box fitted turned by half a turn shows the
+  // same depth and the other colour), everything else mid-gray.
+  int left = labels.width(), right = -1;
+  const std::vector<int> shape = labels.to_host();
+  for (std::size_t i = 0; i < shape.size(); ++i)
+    if (shape[i] == 1) left = std::min(left, int(i) % labels.width()), right = std::max(right, int(i) % labels.width());
+  REQUIRE(right > left);
+  const auto gray = [&](bool swapped) {
+    std::vector<S> g;
+    for (std::size_t i = 0; i < shape.size(); ++i) {
+      const bool light = 2 * (int(i) % labels.width()) < left + right;
+      g.push_back(shape[i] != 1 ? S(0.5) : (light != swapped ? S(0.8) : S(0.2)));
+    }
+    return Image<S, Host>::from_host(labels.width(), labels.height(), g).template to<B>();
+  };
+  // The stages of a first frame, with its gray values: the object made from
+  // the box's detection takes them.
+  Map<S, B> map{s.params};
+  Frame<S, B> frame;
+  FrameResult result;
+  RenderWorkspace<S, B> workspace;
+  result.depth = preprocess(depth, s.camera, s.params, frame);
+  frame.intensity = gray(false);
+  render_models(map, frame, s.camera, s.params, workspace);
+  const Detections det = box_detection(labels, "cup");
+  const std::vector<int> seg = frame.segmentation.to_host();
+  auto created = create_object(map, det, 0, seg, frame.points.to_host(), s.camera, s.params,
+                               unexplained_association<S>(PaperLikelihood<S>{}), result);
+  REQUIRE(created);
+  std::vector<NewObjectWeights<S, B>> fresh;
+  fresh.push_back(std::move(*created));
+  integrate_models(map, frame, s.camera, s.params, fresh, true);
+  REQUIRE(map.objects.size() == 1);
+  const ObjectModel<S, B>& o = *map.objects[0];
+  REQUIRE(!o.colour().empty());
+  std::vector<S> box_mask;
+  for (int l : shape) box_mask.push_back(l == 1 ? S(1) : S(0));
+  const Image<S, B> mask = Image<S, Host>::from_host(labels.width(), labels.height(), box_mask).template to<B>();
+  const SE3<S> T_volume_camera = o.volume().pose().inverse() * map.T_world_camera;
+  using detail::reidentification::colour_agrees;
+  // Where it was made, the same colour agrees; the swapped colour, at the
+  // same depth, does not; with the rule off, or a frame without gray
+  // values, every fit passes.
+  CHECK(colour_agrees(o, T_volume_camera, frame, mask, s.params));
+  frame.intensity = gray(true);
+  CHECK_FALSE(colour_agrees(o, T_volume_camera, frame, mask, s.params));
+  SystemParams<S> off = s.params;
+  off.reidentify_colour_agreement = 0;
+  CHECK(colour_agrees(o, T_volume_camera, frame, mask, off));
+  frame.intensity = Image<S, B>{};
+  CHECK(colour_agrees(o, T_volume_camera, frame, mask, s.params));
+
+  // The whole system: objects keep colour, and tracking stays on depth
+  // (the poses of a run without the rule).
+  System<S, B> with_rule(s.camera, s.params), depth_alone(s.camera, WallAndBox<S>{}.params);
+  const Image<S, B> first_gray = gray(false);
+  with_rule.process(depth, 0.0, &det, &first_gray);
+  depth_alone.process(depth, 0.0, &det, &first_gray);
+  for (int k = 1; k <= 2; ++k) {
+    const SE3<S> pose = SE3<S>::translation(vec3(S(0.01) * S(k), S(0), S(0)));
+    const Image<S, B> d = s.template depth<B>(pose);
+    with_rule.process(d, k / 30.0, nullptr, &first_gray);
+    depth_alone.process(d, k / 30.0, nullptr, &first_gray);
+  }
+  REQUIRE(with_rule.objects().size() == 1);
+  REQUIRE(depth_alone.objects().size() == 1);
+  CHECK(!with_rule.objects()[0]->colour().empty());
+  CHECK(depth_alone.objects()[0]->colour().empty());
+  CHECK(max_abs_diff(with_rule.objects()[0]->pose().matrix(), depth_alone.objects()[0]->pose().matrix()) == S(0));
+  // Shares outside [0, 1] and tolerances that are not positive are refused.
+  SystemParams<S> bad = s.params;
+  bad.reidentify_colour_agreement = 1.5;
+  CHECK_THROWS_WITH(bad.validate(), EMF_CONTAINS("reidentify_colour_agreement must be in [0, 1]"));
+}

@@ -757,6 +757,45 @@ TEMPLATE_LIST_TEST_CASE("A lost object is fitted first from its last pose, and o
     CHECK(inliers > 0.9);
     CHECK(moved_by(panel, T) < 0.005);
   }
+  SECTION("reidentify_colour_agreement: a striped panel slid along its face is found by its colour") {
+    // A patch of the face of a panel with stripes 5 cm wide along x (light
+    // and dark) after the panel slid 2.5 cm along x: depth fits it as well
+    // where it was, and the fit from the last pose is kept (the section
+    // above); its stripes then disagree with the frame's, and the fit
+    // solved again with the model's colour finds the slide.
+    const Vec3<S> half = vec3(S(0.2), S(0.15), S(0.02));
+    const S slide = S(0.025);
+    const auto striped = [&](const Frame<S, B>& f, S offset) {
+      std::vector<S> g;
+      for (const Vec3<S>& p : f.points.to_host())
+        g.push_back(is_valid(p) && std::fmod(double(p.x() - offset) + 10.0, 0.1) < 0.05 ? S(0.8) : S(0.2));
+      return Image<S, Host>::from_host(camera.width, camera.height, g).template to<B>();
+    };
+    std::vector<S> whole, moved_mask;
+    Frame<S, B> first = frame_of(SE3<S>::translation(vec3(S(0), S(0), S(1.2))), half, whole);
+    first.intensity = striped(first, S(0));
+    ObjectModel<S, B> panel = model_of(first, whole);
+    panel.enable_colour();
+    const auto seen = target_of(first, whole);
+    fuse_intensity(panel.colour(), panel.volume().pose(), panel.volume().truncation(),
+                   params.object_integration.max_weight, first.depth, first.intensity, &seen.mask, camera,
+                   SE3<S>::identity(), first.depth.backend());
+    Frame<S, B> moved = frame_of(SE3<S>::translation(vec3(slide, S(0), S(1.2))), half, moved_mask);
+    moved.intensity = striped(moved, slide);
+    std::vector<S> patch = moved_mask;
+    for (int v = 0; v < camera.height; ++v)
+      for (int u = 0; u < camera.width; ++u)  // the upper left quarter of the face, inside its edges
+        if (!(u > 125 && u < 156 && v > 92 && v < 116)) patch[std::size_t(v * camera.width + u)] = 0;
+    const auto [depth_inliers, depth_T] = fit(panel, moved, patch, 1);
+    CHECK(depth_inliers > 0.9);
+    CHECK(moved_by(panel, depth_T) < 0.005);  // depth alone: where it was
+    params.reidentify_colour_agreement = 0.5;
+    CHECK_FALSE(detail::reidentification::colour_agrees(panel, depth_T, moved, target_of(moved, patch).mask, params));
+    const auto [inliers, T] = fit(panel, moved, patch, 1);
+    CHECK(inliers > 0.9);
+    CHECK(std::fabs(moved_by(panel, T) - double(slide)) < 0.008);
+    CHECK(detail::reidentification::colour_agrees(panel, T, moved, target_of(moved, patch).mask, params));
+  }
   SECTION("a box detected 6 cm away: found within the bound, refused beyond it") {
     const MovedBox m = moved_box();
     const auto [inliers, T] = fit(m.box, m.moved, m.there, 1);

@@ -174,6 +174,9 @@ const std::vector<ParameterEntry<S>>& parameter_table() {
       EMF_NUMBER("reidentify_turn_below", reidentify_turn_below,
                  "a lost object's fit with a lower share of a detection on its surface, or not shown in view, is tried "
                  "turned too (0: off)"),
+      EMF_NUMBER("reidentify_colour_agreement", reidentify_colour_agreement,
+                 "least correlation of a re-identification fit's gray values with the model's colour on its "
+                 "surface (0: off; objects then keep colour)"),
       EMF_INTEGER(
           "reidentify_turned_keep", reidentify_turned_keep,
           "turned starts solved to the end, those with the most points on the surface after a short solve (0: all)"),

@@ -69,10 +69,10 @@ void integrate_models(Map<S, B>& map, const Frame<S, B>& frame, const PinholeCam
   });
   const std::size_t n = map.objects.size();
   const B& backend = frame.depth.backend();
-  // Colour (object_colour_weight): every object fuses the frame's gray
+  // Colour (object_colour_weight, reidentify_colour_agreement): every object fuses the frame's gray
   // values with the weights of its integration, on its lane too. Grids are
   // made before the lanes fork, so that the lanes' work follows their fill.
-  const bool coloured = params.object_colour_weight > S(0) && !frame.intensity.empty();
+  const bool coloured = params.uses_colour() && !frame.intensity.empty();
   if (coloured)
     for (std::size_t k = 0; k < n; ++k) map.objects[k]->enable_colour();
   if (objects_workspace) {

@@ -199,6 +199,15 @@ struct SystemParams {
   /// objects": an object that turned while out of view). 0: the last
   /// orientation only.
   double reidentify_turn_below = 0.9;
+  /// Colour in re-identification: a fit of a lost object (to a detection,
+  /// from its last orientation or turned, or to a group of unexplained
+  /// pixels) is taken only where the gray values of the model's colour at
+  /// the points on its surface and the frame's there correlate by at least
+  /// this much (docs/system.md, "Lost objects": a part view of a box fits
+  /// as well turned by a quarter). Every object then keeps its colour (as
+  /// object_colour_weight does), which needs the frames' colour; tracking
+  /// stays on depth unless object_colour_weight is set. 0: off.
+  double reidentify_colour_agreement = 0;
   /// The turned starts (reidentify_turn_below) in two rounds, with the
   /// library's Levenberg-Marquardt: every start solved for
   /// reidentify_turned_rank_iterations iterations, then only this many,
@@ -356,6 +365,9 @@ struct SystemParams {
   int keep_mask_pixels_for(int width, int height) const {
     return std::max(1, int(std::lround(keep_visible_fraction * min_mask_pixels_for(width, height))));
   }
+  /// Whether objects keep colour (object_colour_weight or
+  /// reidentify_colour_agreement): the frames' gray values are then used.
+  bool uses_colour() const { return object_colour_weight > S(0) || reidentify_colour_agreement > 0; }
   /// visibility_border for an image `width` pixels wide (it is given for 640).
   int visibility_border_for(int width) const { return int(std::lround(double(visibility_border) * width / 640.0)); }
   /// An object of this class is a person kept for association only: not
@@ -447,6 +459,8 @@ struct SystemParams {
     detail::require(reidentify_pose_prior >= S(0), w, "reidentify_pose_prior must not be negative (0: off)");
     detail::require(reidentify_turn_below >= 0 && reidentify_turn_below <= 1, w,
                     "reidentify_turn_below must be in [0, 1]");
+    detail::require(reidentify_colour_agreement >= 0 && reidentify_colour_agreement <= 1, w,
+                    "reidentify_colour_agreement must be in [0, 1] (0: off)");
     detail::require(reidentify_turned_keep >= 0, w, "reidentify_turned_keep must not be negative (0: every start)");
     detail::require(reidentify_turned_rank_iterations >= 1, w, "reidentify_turned_rank_iterations must be at least 1");
     detail::require(reidentify_mask_fraction > 0 && reidentify_mask_fraction <= 1, w,

@@ -307,6 +307,113 @@ SE3<S> start_at_target(const ObjectModel<S, B>& o, const DetectionTarget<S, B>& 
   return SE3<S>(Rt, S(0.5) * extent - Rt * (target.centroid + (S(h) * step) * target.ray));
 }
 
+/// Sums over a fit's points on the model's surface of the model's gray
+/// value c there and the frame's I: how many, and the sums of c, I, c^2,
+/// I^2 and cI.
+struct ColourMoments {
+  double n = 0, c = 0, i = 0, cc = 0, ii = 0, ci = 0;
+  EMF_HD ColourMoments operator+(const ColourMoments& o) const {
+    return {n + o.n, c + o.c, i + o.i, cc + o.cc, ii + o.ii, ci + o.ci};
+  }
+  /// The spread (standard deviation) of the model's gray values.
+  double model_spread() const { return n > 0 ? std::sqrt(std::max(cc / n - (c / n) * (c / n), 0.0)) : 0.0; }
+  /// The correlation of the model's gray values with the frame's (Pearson;
+  /// 0 when either does not vary).
+  double correlation() const {
+    if (!(n > 0)) return 0;
+    const double cov = ci / n - (c / n) * (i / n), vc = cc / n - (c / n) * (c / n), vi = ii / n - (i / n) * (i / n);
+    return vc > 0 && vi > 0 ? cov / std::sqrt(vc * vi) : 0.0;
+  }
+};
+
+/// ColourMoments of pixel i: the point of a pixel of `mask`, placed in the
+/// model's volume by T_volume_camera, within `near` of its surface and
+/// where the model has colour.
+template <class S, class View>
+struct ColourOnSurface {
+  View volume;
+  IntensityView<S, const float> colour;
+  ImageView<const Vec3<S>> points;
+  ImageView<const S> intensity;
+  ImageView<const S> mask;
+  SE3<S> T_volume_camera;
+  S near;
+
+  EMF_HD ColourMoments operator()(int i) const {
+    const Vec3<S> p = points[i];
+    const S I = intensity[i];
+    if (!(mask[i] > S(0)) || !std::isfinite(I) || !(std::isfinite(p.x()) && std::isfinite(p.y()) && std::isfinite(p.z())))
+      return {};
+    const Vec3<S> x = T_volume_camera * p;
+    S sdf, c;
+    Vec3<S> gradient;
+    if (!volume.sample(x, sdf) || !(std::fabs(sdf) < near) || !colour.sample_with_gradient(x, c, gradient)) return {};
+    const double cd = double(c), id = double(I);
+    return {1.0, cd, id, cd * cd, id * id, cd * id};
+  }
+};
+
+/// Whether object `o`'s colour agrees with the frame at T_volume_camera
+/// (params.reidentify_colour_agreement): over the pixels of `mask` whose
+/// points lie within the Huber delta of the model's surface, the model's
+/// gray values there and the frame's correlate by at least that much. A
+/// correlation, not a difference: the generator's (and the world's)
+/// shading changes the gray values as an object turns, the pattern stays.
+/// A part view of a box, a cylinder or a ball fits in depth as well
+/// turned as right; its colour tells them apart (docs/system.md, "Lost
+/// objects"). True when the rule is off, the model or the frame has no
+/// colour, fewer than keep_mask_pixels such points have colour, or the
+/// model's colour there hardly varies (a spread under 0.02: nothing to
+/// judge by).
+template <class S, Backend B>
+bool colour_agrees(const ObjectModel<S, B>& o, const SE3<S>& T_volume_camera, const Frame<S, B>& frame,
+                   const Image<S, B>& mask, const SystemParams<S>& params) {
+  if (!(params.reidentify_colour_agreement > 0) || o.colour().empty() || frame.intensity.empty()) return true;
+  const auto volume = o.volume().view();
+  const ColourMoments m = transform_reduce_index(
+      frame.points.backend(), frame.points.size(),
+      ColourOnSurface<S, decltype(volume)>{volume, std::as_const(o.colour()).view(), frame.points.view(),
+                                           frame.intensity.view(), mask.view(), T_volume_camera,
+                                           params.huber_voxels * o.volume().voxel_size()},
+      ColourMoments{}, thrust::plus<ColourMoments>());
+  if (m.n < double(params.keep_mask_pixels_for(frame.points.width(), frame.points.height())) ||
+      m.model_spread() < 0.02)
+    return true;
+  return m.correlation() >= params.reidentify_colour_agreement;
+}
+
+/// A fit of object `o` to the target whose colour disagrees
+/// (colour_agrees) solved again from its pose `start` with the model's
+/// colour terms (object_colour_weight, 10 when that is 0): where the depth
+/// leaves the pose free along a face or an axis (a box slid by a square of
+/// its checker), the pattern holds it. Its share of the points on the
+/// surface and its T_volume_camera when it may be a fit (may_be_fit) and
+/// its colour agrees; nothing otherwise.
+template <class S, Backend B, class Norm, class Solver>
+std::optional<std::pair<double, SE3<S>>> colour_refined_fit(const ObjectModel<S, B>& o,
+                                                            const DetectionTarget<S, B>& target,
+                                                            const Frame<S, B>& frame, const SE3<S>& T_world_camera,
+                                                            const SystemParams<S>& params, const Norm& norm,
+                                                            const Solver& solver, int frames_lost, const SE3<S>& start) {
+  const auto& volume = o.volume();
+  const B& backend = frame.points.backend();
+  const SdfAlignmentParams<S> align = alignment_params(params, params.object_integration.max_weight);
+  auto terms = sdf_alignment_in_box(volume, frame.points, &target.mask, align, backend);
+  terms.colour = o.colour().view();
+  terms.intensity = frame.intensity.view();
+  terms.colour_scale = (params.object_colour_weight > S(0) ? params.object_colour_weight : S(10)) * volume.voxel_size();
+  const PosePrior<S> prior = fit_prior(o, params).towards(start);
+  SolveReport report;
+  LinearizationCache<S, B> values;
+  const SE3<S> T = solve_coarse_to_fine(backend, terms, scaled_norm(norm, volume.voxel_size()), align, solver, start,
+                                        &report, values, &prior);
+  if (!may_be_fit(o, report, T, T_world_camera, params, frames_lost) || !colour_agrees(o, T, frame, target.mask, params))
+    return std::nullopt;
+  const NormalEquations6 n = linearize(backend, surface_count_terms(o, target, frame, params),
+                                       OffSurfaceCount<S>{params.huber_voxels * volume.voxel_size()}, T);
+  return std::pair{(n.terms - n.cost) / double(target.points), T};
+}
+
 /// How well object `o` fits the target (fit_from): aligned first from its
 /// last pose, then from its last orientation placed at the target
 /// (start_at_target, h = 0, 1, 2, 3). Returns the best share of the points
@@ -334,6 +441,12 @@ std::pair<double, SE3<S>> fit_to_target(const ObjectModel<S, B>& o, const Detect
     if (k == 0) to_beat = inliers + params.reidentify_keep_margin;
     if (inliers > best_inliers && (k == 0 || inliers > to_beat)) best_inliers = inliers, best_T = T;
   }
+  // A fit whose colour disagrees is solved again with the colour
+  // (reidentify_colour_agreement; colour_agrees is true when it is off).
+  if (best_inliers >= params.reidentify_min_inliers && !colour_agrees(o, best_T, frame, target.mask, params))
+    if (const auto refined =
+            colour_refined_fit(o, target, frame, T_world_camera, params, norm, solver, frames_lost, best_T))
+      return *refined;
   return {best_inliers, best_T};
 }
 
@@ -457,15 +570,17 @@ bool consistent_with_frame(const ObjectModel<S, B>& o, const SE3<S>& T_volume_ca
 }
 
 /// Whether the frame shows object `o` placed at T_volume_camera both in
-/// the pixels `mask` (consistent_with_frame) and wherever its model is
-/// drawn (shown_in_view; `drawn` keeps the cast's images between calls):
-/// the test of a fit found without the pose it was lost in to go on from
-/// (refind_unexplained, and reidentify's turned fits).
+/// the pixels `mask` (consistent_with_frame, and in colour: colour_agrees)
+/// and wherever its model is drawn (shown_in_view; `drawn` keeps the
+/// cast's images between calls): the test of a fit found without the pose
+/// it was lost in to go on from (refind_unexplained, and reidentify's
+/// turned fits).
 template <class S, Backend B>
 bool shown_in_mask_and_view(const ObjectModel<S, B>& o, const SE3<S>& T_volume_camera, const Frame<S, B>& frame,
                             const Image<S, B>& mask, const PinholeCamera<S>& camera, const SystemParams<S>& params,
                             RaycastResult<S, B>& drawn) {
   return consistent_with_frame(o, T_volume_camera, frame, mask, camera) &&
+         colour_agrees(o, T_volume_camera, frame, mask, params) &&
          shown_in_view(o, T_volume_camera, frame, camera, params, drawn);
 }
 
@@ -584,8 +699,13 @@ std::optional<NewObjectWeights<S, B>> reidentify(Map<S, B>& map, const Frame<S, 
                                                                        frames_lost(k));
     fits.push_back({int(k), inliers, T});
   }
-  auto fit = detail::reidentification::best_shown_fit(fits, params.reidentify_min_inliers, object_of, frame,
-                                                      target->mask, camera);
+  auto fit = detail::reidentification::best_shown_fit(
+      fits, params.reidentify_min_inliers, [&](const detail::reidentification::CandidateFit<S>& f) {
+        return detail::reidentification::consistent_with_frame(object_of(f.candidate), f.T_volume_camera, frame,
+                                                               target->mask, camera) &&
+               detail::reidentification::colour_agrees(object_of(f.candidate), f.T_volume_camera, frame,
+                                                       target->mask, params);
+      });
   // An object that turned while out of view: from its last orientation the
   // alignment can settle on a wrong pose that still covers the detection
   // (on c215-tab900 of bench/generalisation.py a car turned 91 degrees was

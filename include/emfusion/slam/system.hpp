@@ -259,7 +259,7 @@ class System {
  private:
   /// Keeps the frame's gray values for the objects' colour, or none.
   void take_intensity(const Image<S, B>* intensity) {
-    if (!(params_.object_colour_weight > S(0)) || !intensity) {
+    if (!params_.uses_colour() || !intensity) {
       frame_.intensity = Image<S, B>{};
       return;
     }
