@@ -342,8 +342,8 @@ struct ColourOnSurface {
   EMF_HD ColourMoments operator()(int i) const {
     const Vec3<S> p = points[i];
     const S I = intensity[i];
-    if (!(mask[i] > S(0)) || !std::isfinite(I) || !(std::isfinite(p.x()) && std::isfinite(p.y()) && std::isfinite(p.z())))
-      return {};
+    const bool measured = std::isfinite(p.x()) && std::isfinite(p.y()) && std::isfinite(p.z()) && std::isfinite(I);
+    if (!(mask[i] > S(0)) || !measured) return {};
     const Vec3<S> x = T_volume_camera * p;
     S sdf, c;
     Vec3<S> gradient;
