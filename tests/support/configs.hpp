@@ -30,7 +30,8 @@ using AllBackends = std::tuple<Host, Cuda>;
 using AllBackends = std::tuple<Host>;
 #endif
 
-/// The long whole-system rule tests (tests/slam/test_system_rules.cpp):
+/// The long whole-system rule tests (tests/slam/test_system_rules.cpp,
+/// test_lost_objects.cpp, test_hidden_objects.cpp):
 /// float on every backend built. Their rules do not depend on the scalar,
 /// and System<double> runs in the stage and hostile-frame tests; in double
 /// too they cost over a minute of the sanitizer build's tests.
