@@ -666,6 +666,9 @@ void run(const RunOptions& o) {
       if (r.invalid_detections > 0 || r.detections_over_cap > 0)
         fmt::print(stderr, "{}frame {}: {} detections ignored (unusable label or score), {} over the object cap\n", nl,
                    i, r.invalid_detections, r.detections_over_cap);
+      if (r.held_for_colour > 0)
+        fmt::print(stderr, "{}frame {}: {} detections made no object (a lost object fits them in depth, not colour)\n",
+                   nl, i, r.held_for_colour);
     }
     const double elapsed = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     const double fps = double(i + 1 - first) / elapsed;

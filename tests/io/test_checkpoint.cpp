@@ -236,7 +236,8 @@ TEST_CASE("Checkpoints: damaged, foreign, newer and mismatched checkpoints are r
   newer[8] = char(checkpoint_version + 1);
   CHECK(contains(refusal(newer), "version " + std::to_string(checkpoint_version + 1) + " is not supported"));
   // Versions 1 (a dense background without its kind byte), 2 (no hidden
-  // times of the records) and 3 (no colour flags at the end) are still read,
+  // times of the records), 3 (no colour flags at the end) and 4 (no held
+  // flags of lost objects) are still read,
   // and an unknown kind is refused: payloads rebuilt with a right checksum.
   const auto rebuilt = [&](std::uint32_t version, const std::string& payload) {
     std::string out = bytes.substr(0, 8);
@@ -289,7 +290,34 @@ TEST_CASE("Checkpoints: damaged, foreign, newer and mismatched checkpoints are r
   CHECK(load_checkpoint<S>(bad).map.records.back().hidden_since == 1.25);
   CHECK(contains(refusal(with_last_time(INFINITY)), "infinite hidden time"));
   CHECK(contains(refusal(rebuilt(3, v3_payload + "12345678")), "bytes follow the records' hidden times"));
-  CHECK(contains(refusal(rebuilt(checkpoint_version, payload + "12345678")), "bytes follow the objects' colour"));
+  // No lost object here, so version 5 adds no held flags to version 4.
+  REQUIRE(system.map().lost.empty());
+  CHECK(contains(refusal(rebuilt(4, payload + "12345678")), "bytes follow the objects' colour"));
+  CHECK(contains(refusal(rebuilt(checkpoint_version, payload + "12345678")),
+                 "bytes follow the lost objects' held flags"));
+  {
+    // Version 5: a lost object's held flag comes back; a flag other than
+    // 0 or 1 is refused, and a version 4 file is read with none held.
+    Checkpoint<S> state = load_checkpoint<S>(good);
+    REQUIRE(state.map.objects.size() == 1);
+    state.map.lost.push_back(LostObject<S, Host>{std::move(state.map.objects[0]), 1, true});
+    state.map.objects.clear();
+    const std::string held_bytes = checkpoint_bytes(state.map, state.camera);
+    emfusion::test::write_bytes(bad, held_bytes);
+    const Checkpoint<S> held = load_checkpoint<S>(bad);
+    REQUIRE(held.map.lost.size() == 1);
+    CHECK(held.map.lost[0].held_detection);
+    CHECK(checkpoint_bytes(held.map, held.camera) == held_bytes);
+    const std::string held_payload = held_bytes.substr(24, held_bytes.size() - 28);
+    REQUIRE(held_payload.back() == 1);
+    std::string two = held_payload;
+    two.back() = 2;
+    CHECK(contains(refusal(rebuilt(checkpoint_version, two)), "a lost object's held flag must be 0 or 1, got 2"));
+    emfusion::test::write_bytes(bad, rebuilt(4, held_payload.substr(0, held_payload.size() - 1)));
+    const Checkpoint<S> four = load_checkpoint<S>(bad);
+    REQUIRE(four.map.lost.size() == 1);
+    CHECK_FALSE(four.map.lost[0].held_detection);
+  }
   // A colour flag other than 0 or 1, and a colour that is not there.
   std::string flag = payload;
   flag.back() = 2;

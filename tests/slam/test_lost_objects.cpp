@@ -423,6 +423,38 @@ TEMPLATE_LIST_TEST_CASE("A lost object is fitted first from its last pose, and o
     CHECK(inliers > 0.9);
     CHECK(std::fabs(moved_by(panel, T) - double(slide)) < 0.008);
     CHECK(detail::reidentification::colour_agrees(panel, T, moved, target_of(moved, patch).mask, params));
+    // A turned fit of reidentify is taken the same way
+    // (shown_or_colour_refined): where the frame shows it in depth and only
+    // its colour disagrees, solved again with the colour; where the frame
+    // does not show it, refused; with the rule off, taken as it is.
+    moved.segmentation = Image<int, B>(camera.width, camera.height, 0);  // no live object claims a pixel
+    std::vector<std::uint8_t> panel_px;  // the models are drawn where they were foreground
+    for (const S m : whole) panel_px.push_back(std::uint8_t(m > S(0)));
+    update_foreground(panel.foreground(), panel.volume().pose(), panel.volume().truncation(), first.depth,
+                      Image<std::uint8_t, Host>::from_host(camera.width, camera.height, panel_px).template to<B>(),
+                      Image<std::uint8_t, B>(camera.width, camera.height, std::uint8_t(1)), camera,
+                      SE3<S>::identity(), panel.volume().backend());
+    const auto target = target_of(moved, patch);
+    RaycastResult<S, B> drawn;
+    const auto take = [&](const SE3<S>& T_fit) {
+      return detail::reidentification::shown_or_colour_refined(
+          panel, detail::reidentification::CandidateFit<S>{7, depth_inliers, T_fit}, target, moved,
+          SE3<S>::identity(), camera, params, HuberNorm<S>{params.huber_voxels}, LevenbergMarquardt{params.lm}, 1,
+          0.5, drawn);
+    };
+    const auto refined = take(depth_T);
+    REQUIRE(refined);
+    CHECK(refined->candidate == 7);
+    CHECK(std::fabs(moved_by(panel, refined->T_volume_camera) - double(slide)) < 0.008);
+    CHECK(detail::reidentification::colour_agrees(panel, refined->T_volume_camera, moved, target.mask, params));
+    const auto agreeing = take(T);  // agrees already: taken as it is
+    REQUIRE(agreeing);
+    CHECK(double(norm(agreeing->T_volume_camera.translation() - T.translation())) == 0);
+    CHECK_FALSE(take(SE3<S>::translation(vec3(S(0), S(0), S(-0.3))) * depth_T));  // drawn 30 cm off the surface
+    params.reidentify_colour_agreement = 0;
+    const auto off = take(depth_T);
+    REQUIRE(off);
+    CHECK(double(norm(off->T_volume_camera.translation() - depth_T.translation())) == 0);
   }
   SECTION("a box detected 6 cm away: found within the bound, refused beyond it") {
     const MovedBox m = moved_box();

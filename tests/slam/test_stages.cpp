@@ -1349,6 +1349,7 @@ TEMPLATE_LIST_TEST_CASE("With reidentify_colour_agreement, objects keep colour a
   std::vector<NewObjectWeights<S, B>> fresh;
   fresh.push_back(std::move(*created));
   integrate_models(map, frame, s.camera, s.params, fresh, true);
+  update_foreground_counts(map, frame, det, seg, {-1}, fresh, s.camera);
   REQUIRE(map.objects.size() == 1);
   const ObjectModel<S, B>& o = *map.objects[0];
   REQUIRE(!o.colour().empty());
@@ -1368,6 +1369,51 @@ TEMPLATE_LIST_TEST_CASE("With reidentify_colour_agreement, objects keep colour a
   CHECK(colour_agrees(o, T_volume_camera, frame, mask, off));
   frame.intensity = Image<S, B>{};
   CHECK(colour_agrees(o, T_volume_camera, frame, mask, s.params));
+
+  // The object lost: a detection of it in depth with gray values in four
+  // quarters (a checker no half turn or quarter turn of its light and dark
+  // halves matches) brings nothing back and, the first time since it was
+  // lost, makes no new object either (held_for_colour); the second time it
+  // makes one. In the model's colour the detection brings it back.
+  {
+    int top = labels.height(), bottom = -1;
+    for (std::size_t i = 0; i < shape.size(); ++i)
+      if (shape[i] == 1)
+        top = std::min(top, int(i) / labels.width()), bottom = std::max(bottom, int(i) / labels.width());
+    std::vector<S> g;
+    for (std::size_t i = 0; i < shape.size(); ++i) {
+      const bool left_half = 2 * (int(i) % labels.width()) < left + right;
+      const bool top_half = 2 * (int(i) / labels.width()) < top + bottom;
+      g.push_back(shape[i] != 1 ? S(0.5) : (left_half != top_half ? S(0.8) : S(0.2)));
+    }
+    const Image<S, B> quarters = Image<S, Host>::from_host(labels.width(), labels.height(), g).template to<B>();
+    const int id = o.id();
+    map.lost.push_back(LostObject<S, B>{std::move(map.objects[0]), map.frames});
+    map.objects.clear();
+    REQUIRE_FALSE(map.lost[0].held_detection);
+    const std::vector<int> no_model(shape.size(), 0);
+    const HuberNorm<S> huber{S(2)};
+    const auto detect = [&](const Image<S, B>& intensity) {
+      frame.intensity = intensity;
+      FrameResult r;
+      handle_detections(map, frame, det, no_model, s.camera, s.params, PaperLikelihood<S>{}, huber,
+                        LevenbergMarquardt{}, r);
+      return r;
+    };
+    const FrameResult held = detect(quarters);
+    CHECK(held.held_for_colour == 1);
+    CHECK(held.created.empty());
+    CHECK(held.reidentified.empty());
+    CHECK(map.lost.size() == 1);
+    CHECK(map.lost[0].held_detection);
+    const FrameResult made = detect(quarters);
+    CHECK(made.held_for_colour == 0);
+    CHECK(made.created.size() == 1);
+    CHECK(made.reidentified.empty());
+    const FrameResult back = detect(gray(false));
+    CHECK(back.reidentified == std::vector<int>{id});
+    CHECK(map.lost.empty());
+  }
 
   // The whole system: objects keep colour, and tracking stays on depth
   // (the poses of a run without the rule).

@@ -43,8 +43,9 @@ namespace emfusion {
 /// The version save_checkpoint writes; the reader refuses newer ones.
 /// Version 1 held a dense background only; version 2 says which kind it is;
 /// version 3 adds the records' hidden times (ObjectRecord::hidden_since);
-/// version 4 the objects' colour (ObjectModel::colour).
-inline constexpr std::uint32_t checkpoint_version = 4;
+/// version 4 the objects' colour (ObjectModel::colour); version 5 whether
+/// each lost object held a detection (LostObject::held_detection).
+inline constexpr std::uint32_t checkpoint_version = 5;
 /// The first 8 bytes of every checkpoint.
 inline constexpr char checkpoint_magic[8] = {'E', 'M', 'F', 'C', 'K', 'P', 'T', '\0'};
 
@@ -463,6 +464,7 @@ std::string checkpoint_bytes(const Map<S, B>& map, const PinholeCamera<S>& camer
   for (const ObjectRecord& r : map.records) w.f64(r.hidden_since);  // version 3
   for (const auto& o : map.objects) w.colour(*o);                   // version 4
   for (const LostObject<S, B>& l : map.lost) w.colour(*l.object);
+  for (const LostObject<S, B>& l : map.lost) w.u8(l.held_detection ? 1 : 0);  // version 5
 
   std::string out(checkpoint_magic, checkpoint_magic + 8);
   detail::bytes::put_u32(out, checkpoint_version);
@@ -584,9 +586,13 @@ Checkpoint<S, B> parse_checkpoint(const std::string& data, const std::string& so
     for (auto& o : map.objects) r.colour(*o);
     for (LostObject<S, B>& l : map.lost) r.colour(*l.object);
   }
+  // Version 5: whether each lost object held a detection.
+  if (version >= 5)
+    for (LostObject<S, B>& l : map.lost) l.held_detection = r.flag("a lost object's held flag");
   if (r.left() != 0)
     r.fail(std::to_string(r.left()) + " bytes follow the " +
-           (version >= 4   ? "objects' colour"
+           (version >= 5   ? "lost objects' held flags"
+            : version >= 4 ? "objects' colour"
             : version >= 3 ? "records' hidden times"
                            : "last lost object"));
   // Every live and lost object has a record (Map::record_of relies on it).

@@ -190,9 +190,14 @@ DetectionUpdate<S, B> handle_detections(Map<S, B>& map, const Frame<S, B>& frame
   const S outside = unexplained_association<S>(likelihood);
   for (std::size_t d = 0; d < det.instances.size(); ++d) {
     if (match.object_of[d] >= 0) continue;
-    if (auto w = reidentify(map, frame, det, int(d), seg, points, camera, params, norm, solver, outside)) {
+    bool held = false;
+    if (auto w = reidentify(map, frame, det, int(d), seg, points, camera, params, norm, solver, outside, &held)) {
       result.found_again(map.objects.back()->id(), FoundBy::detection);
       update.fresh.push_back(std::move(*w));
+      continue;
+    }
+    if (held) {  // a lost object fitted it in depth but not in colour: no second model of it
+      ++result.held_for_colour;
       continue;
     }
     if (auto w = create_object(map, det, int(d), seg, points, camera, params, outside, result))

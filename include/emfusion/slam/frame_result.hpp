@@ -161,6 +161,10 @@ struct FrameResult {
   int detections = 0, matched = 0;      ///< instances received; detections matched to objects
   int invalid_detections = 0;           ///< instances ignored: label outside 1..65535 or repeated, score not finite
   int detections_over_cap = 0;          ///< unmatched detections not considered: max_objects objects were live
+  /// Unmatched detections that made no new object because a lost object
+  /// fitted them in depth but not in colour (reidentify_colour_agreement,
+  /// once per loss: docs/system.md, "Lost objects").
+  int held_for_colour = 0;
   std::vector<int> created, deleted;    ///< object ids
   /// Lost objects (deleted as not visible) found again, by id: a detection
   /// brought them back, or the frame showed them where they were lost

@@ -52,6 +52,10 @@ template <class S, Backend B>
 struct LostObject {
   std::unique_ptr<ObjectModel<S, B>> object;
   int lost_at = 0;  ///< the frame it was deleted as not visible
+  /// A detection it fitted in depth but not in colour was kept from making
+  /// a new object since it was lost (reidentify_colour_agreement; once per
+  /// loss: detail::reidentification::hold_for_colour).
+  bool held_detection = false;
 };
 
 template <class S, Backend B = Host>
