@@ -443,7 +443,7 @@ struct RaycastPixel {
     S f_march = S(0);
     for (;;) {
       if (refining == 0 && normal.stage == 0 && !(k < steps && t <= t_end)) break;
-      S f;
+      S f = S(0);  // set by sample_observed; initialised for g++'s -Wmaybe-uninitialized at -O3 (nvcc's host pass)
       const Vec3<S> p = normal.stage > 0 ? normal.point(p_hit) : origin + (refining > 0 ? c.t : t) * dir;
       const bool observed = sampler.sample_observed(p, f);
       if (normal.stage > 0) {
