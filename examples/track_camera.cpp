@@ -14,7 +14,7 @@
 //                [--bilateral-radius R] [--central-gradient] [--depth-weight Z] [--store float|half]
 //                [--huber VOXELS] [--truncation VOXELS] [--integrate-filtered]
 //                [--pyramid LEVELS] [--predict] [--retry] [--photometric WEIGHT]
-//                [--photometric-huber H] [--reference-solver] [--verbose]
+//                [--photometric-huber H] [--converged-gain G] [--reference-solver] [--verbose]
 //
 // Defaults: a sparse voxel-block volume, unbounded, of at most --blocks
 // blocks of 8^3 voxels (volume/sparse_tsdf_volume.hpp); --volume dense is
@@ -25,7 +25,9 @@
 // undamped step is below 1e-5; `--reference-solver --pyramid 1 --stride 1
 // --volume dense` is the paper's tracker. Both gave the same ATE within
 // 0.01 cm on every sequence measured, the defaults at a third of the CPU
-// time (docs/decisions.md).
+// time (docs/decisions.md). The default solver also ends once a step lowers
+// the cost by at most --converged-gain of it (the system's
+// camera_converged_gain, 1e-4; 0: off).
 // --store half keeps the volume's SDF and weight in 16 bits (core/half.hpp).
 // --huber and --truncation change the paper's 2 and 10 voxels;
 // --integrate-filtered fuses the bilateral-filtered depth instead of the raw
@@ -77,6 +79,7 @@ struct Options {
   bool reference_solver = false;  // --reference-solver: LevenbergMarquardtParams{}, the paper's
   double voxel_size = 0.01;
   double tau = 0;  // --tau: the solver's initial damping; 0 = the solver's own
+  double converged_gain = -1;  // --converged-gain: LevenbergMarquardtParams::converged_gain; -1 = the system's
   std::string integration = "paper";
   double behind_band = -1;
   double silhouette_guard = -1;
@@ -93,10 +96,14 @@ struct Options {
 /// The default solver: the system's (tau 1e-3, eps2 1e-6), converged once
 /// the undamped step is below 1e-5 (10 um, 0.0006 degrees), which eps2
 /// alone never says near the world's origin, where the sparse volume's
-/// frame sits (docs/decisions.md).
+/// frame sits, or once a step lowers the cost by at most 1e-4 of it: the
+/// system's camera solve (SystemParams::camera_converged_step and
+/// camera_converged_gain; docs/decisions.md).
 LevenbergMarquardtParams track_camera_lm() {
+  const SystemParams<S> system;
   LevenbergMarquardtParams lm = SystemParams<S>::fast_lm();
-  lm.converged_step = 1e-5;
+  lm.converged_step = system.camera_converged_step;
+  lm.converged_gain = system.camera_converged_gain;
   return lm;
 }
 
@@ -114,6 +121,7 @@ void track_with(const Options& o, const examples::CameraInput& seq, Volume& volu
   align.pyramid_levels = o.pyramid;
   LevenbergMarquardtParams lm = o.reference_solver ? LevenbergMarquardtParams{} : track_camera_lm();
   if (o.tau > 0) lm.tau = o.tau;
+  if (o.converged_gain >= 0) lm.converged_gain = o.converged_gain;
   IntegrationParams<S> fusion = o.integration == "refined" ? IntegrationParams<S>::refined() : IntegrationParams<S>{};
   if (o.behind_band > 0) fusion.behind_band = S(o.behind_band);
   if (o.silhouette_guard >= 0) fusion.silhouette_guard = S(o.silhouette_guard);
@@ -249,6 +257,10 @@ Options parse(int argc, char** argv) {
     else if (a == "--stride") o.stride = examples::parse_positive_int(a, v, 16);
     else if (a == "--voxel-size") o.voxel_size = examples::parse_positive_double(a, v);
     else if (a == "--tau") o.tau = examples::parse_positive_double(a, v);
+    else if (a == "--converged-gain") {
+      o.converged_gain = examples::parse_double(a, v);
+      if (o.converged_gain < 0) throw std::invalid_argument("--converged-gain must not be negative (0: off)");
+    }
     else if (a == "--behind-band") o.behind_band = examples::parse_positive_double(a, v);
     else if (a == "--bilateral-radius") o.bilateral_radius = examples::parse_int(a, v, 0, 16);
     else if (a == "--silhouette-guard") o.silhouette_guard = examples::parse_positive_double(a, v);
@@ -280,7 +292,7 @@ Options parse(int argc, char** argv) {
                                 "[--integration paper|refined] [--behind-band F] [--silhouette-guard G] "
                                 "[--bilateral-radius R] [--depth-weight Z] [--central-gradient] [--store float|half] "
                                 "[--huber VOXELS] [--truncation VOXELS] [--integrate-filtered] "
-                                "[--photometric WEIGHT] [--photometric-huber H] "
+                                "[--photometric WEIGHT] [--photometric-huber H] [--converged-gain G] "
                                 "[--pyramid LEVELS] [--predict] [--retry] [--reference-solver] [--verbose]");
   o.sequence = positional[0], o.output = positional[1];
   return o;

@@ -755,6 +755,10 @@ TEST_CASE("Hostile frames: the guards' parameters are validated", "[slam]") {
         std::string::npos);
   CHECK(error([](SystemParams<float>& p) { p.camera_converged_step = NAN; }).find("camera_converged_step") !=
         std::string::npos);
+  CHECK(error([](SystemParams<float>& p) { p.camera_converged_gain = 0; }).empty());  // off
+  for (const double bad : {-1e-4, double(NAN), double(INFINITY)})
+    CHECK(error([bad](SystemParams<float>& p) { p.camera_converged_gain = bad; }).find("camera_converged_gain") !=
+          std::string::npos);
   // Lost objects.
   CHECK(error([](SystemParams<float>& p) { p.lost_object_frames = 0; }).empty());  // the paper's rule
   CHECK(error([](SystemParams<float>& p) { p.lost_object_frames = -1; }).find("lost_object_frames") !=
@@ -813,10 +817,14 @@ TEST_CASE("The camera's solve takes its own stride, pyramid and stop; objects ke
   // The stop reaches a solver that has it; others are left as they are.
   LevenbergMarquardt lm{p.lm};
   REQUIRE(lm.params.converged_step == 0);
+  REQUIRE(lm.params.converged_gain == 0);
   CHECK(camera_solver(lm, p).params.converged_step == 1e-5);
+  CHECK(camera_solver(lm, p).params.converged_gain == 1e-4);
   CHECK(camera_solver(lm, p).params.tau == lm.params.tau);
   p.camera_converged_step = 0;
+  p.camera_converged_gain = 0;
   CHECK(camera_solver(lm, p).params.converged_step == 0);
+  CHECK(camera_solver(lm, p).params.converged_gain == 0);
   GaussNewton gn;
   gn.params.max_iterations = 7;
   CHECK(camera_solver(gn, p).params.max_iterations == 7);

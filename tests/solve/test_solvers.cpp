@@ -166,6 +166,102 @@ TEMPLATE_LIST_TEST_CASE("LM's converged_step and refined(): fewer iterations, th
   CHECK(pose_error(from_refined, f.truth) < tol);
 }
 
+namespace {
+
+/// The normal equations of a cost whose quadratic model promises a gain at
+/// every pose (H = I, g = (0.1, ..., 0.1), cost 1) while a step to another
+/// pose lowers it by `gained` only: the camera's cost near its minimum,
+/// where an interpolated SDF and a robust norm leave it flat along a
+/// direction the frame hardly observes, and the undamped step stays long.
+NormalEquations6 flat_cost(const SE3<double>* reference, double gained) {
+  NormalEquations6 n = NormalEquations6::zero();
+  for (int i = 0; i < 6; ++i) {
+    Vec6<double> J = Vec6<double>::zero();
+    J[i] = 1;
+    n.add(J, 0.1, 1.0, 0.0);
+  }
+  n.cost = 1;
+  if (reference) n.shared_reference_cost = 1, n.shared_cost = 1 - gained;
+  return n;
+}
+
+}  // namespace
+
+TEST_CASE("LM's converged_gain ends a solve once its steps stop lowering the cost", "[solve]") {
+  LevenbergMarquardtParams off;  // the system's: tau 1e-3, eps2 1e-6
+  off.tau = 1e-3, off.eps2 = 1e-6;
+  LevenbergMarquardtParams on = off;
+  on.converged_gain = 1e-4;
+  const auto solve = [](double gained, const LevenbergMarquardtParams& p) {
+    SolveReport report;
+    levenberg_marquardt([&](const SE3<double>&, const SE3<double>* ref) { return flat_cost(ref, gained); },
+                        SE3<double>::identity(), p, &report);
+    return report;
+  };
+  SECTION("steps taken that gain a millionth of the cost: the first ends it") {
+    const SolveReport without = solve(1e-6, off), with = solve(1e-6, on);
+    INFO(without.iterations << " iterations without, " << with.iterations << " with");
+    CHECK(without.accepted_steps > 10);
+    CHECK(with.reason == StopReason::gain_small);
+    CHECK(with.converged());
+    CHECK(with.iterations == 1);
+    CHECK(with.accepted_steps == 1);
+  }
+  SECTION("every step refused: ended once the damped model expects too little, not at eps2") {
+    const SolveReport without = solve(0, off), with = solve(0, on);
+    INFO(without.iterations << " iterations without, " << with.iterations << " with");
+    CHECK(without.reason == StopReason::step_small);
+    CHECK(with.reason == StopReason::gain_small);
+    CHECK(with.accepted_steps == 0);
+    CHECK(with.iterations < without.iterations);
+  }
+  SECTION("steps that gain a tenth of the cost go on; heavy damping at the start is no refusal") {
+    LevenbergMarquardtParams reference = LevenbergMarquardtParams{};  // tau 1e3
+    reference.converged_gain = 1e-4;
+    reference.max_iterations = 20;
+    CHECK(solve(0.1, on).reason == StopReason::max_iterations);
+    CHECK(solve(0.1, reference).iterations == 20);
+  }
+  SECTION("off by default; with_converged_gain sets it where a solver has it") {
+    CHECK(LevenbergMarquardtParams{}.converged_gain == 0);
+    CHECK(with_converged_gain(LevenbergMarquardt{}, 1e-3).params.converged_gain == 1e-3);
+    CHECK(with_converged_gain(GaussNewton{}, 1e-3).params.max_iterations == GaussNewtonParams{}.max_iterations);
+    LevenbergMarquardtParams bad;
+    bad.converged_gain = -1;
+    CHECK_THROWS_WITH(bad.validate(), EMF_CONTAINS("converged_gain"));
+  }
+}
+
+TEMPLATE_LIST_TEST_CASE("LM's converged_gain leaves a smooth solve's pose as it was", "[solve]",
+                        emfusion::test::AllConfigs) {
+  using S = typename TestType::Scalar;
+  using B = typename TestType::Backend;
+  const B backend{};
+  // Targets off the truth by up to 2 mm: the cost's minimum is not zero.
+  Fixture<S, B> f(200, 5);
+  std::mt19937 rng(9);
+  std::uniform_real_distribution<double> u(-0.002, 0.002);
+  std::vector<Vec3<S>> t = f.target.to_host();
+  for (Vec3<S>& x : t) x = x + vec3(S(u(rng)), S(u(rng)), S(u(rng)));
+  f.target = Image<Vec3<S>, Host>::from_host(int(t.size()), 1, t).template to<B>();
+  const auto problem = f.problem();
+  const auto lin = [&](const SE3<S>& T, const SE3<S>* ref) { return linearize(backend, problem, L2Norm<S>{}, T, ref); };
+  for (const double tau : {1e-3, 1e3}) {
+    LevenbergMarquardtParams off;
+    off.tau = tau;
+    LevenbergMarquardtParams on = off;
+    on.converged_gain = 1e-4;
+    SolveReport without, with;
+    const SE3<S> reference = levenberg_marquardt(lin, SE3<S>::identity(), off, &without);
+    const SE3<S> stopped = levenberg_marquardt(lin, SE3<S>::identity(), on, &with);
+    INFO("tau " << tau << ": " << without.iterations << " iterations without, " << with.iterations << " with");
+    CHECK(with.converged());
+    CHECK(with.iterations <= without.iterations);
+    CHECK(pose_error(stopped, reference) < 1e-4);
+    CHECK(pose_error(stopped, f.truth) < 2e-3);
+  }
+}
+
 TEST_CASE("LM's cheap bound on the converged step is never below the step itself", "[solve]") {
   // The solver takes the log of its pose only for steps under the bound, so
   // a bound below step_norm_limit would stop solves later than before.

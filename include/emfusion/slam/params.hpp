@@ -70,7 +70,7 @@ struct SystemParams {
   /// reference. lm.converged_step stays off for objects: on the
   /// generalisation benchmark it moved them both ways (docs/decisions.md,
   /// "Solver stops, pyramid and pixel stride"); the camera's solve has
-  /// camera_converged_step.
+  /// camera_converged_step and camera_converged_gain.
   LevenbergMarquardtParams lm = fast_lm();
   int pixel_stride = 1;          ///< object solves use every n-th pixel in x and y
   /// Colour in the objects' models (volume/intensity_grid.hpp): each
@@ -91,10 +91,14 @@ struct SystemParams {
   /// track_camera measured the same ATE with them in a fraction of the time
   /// (docs/decisions.md, "The camera's own solve settings; work objects
   /// skip"); objects keep pixel_stride, pyramid_levels and lm as they are.
-  /// The paper: 1, 1, 0.
+  /// The paper: 1, 1, 0, 0.
   int camera_pixel_stride = 0;           ///< 0: auto_pixel_stride (every 2nd pixel of a 640x480 frame)
   int camera_pyramid_levels = 3;         ///< as pyramid_levels, for the camera
   double camera_converged_step = 1e-5;   ///< lm.converged_step for the camera (0: off)
+  /// lm.converged_gain for the camera (0: off): its solve ends once a step
+  /// lowers the cost by at most this fraction (docs/decisions.md, "The
+  /// camera's solve ends where the cost stops falling").
+  double camera_converged_gain = 1e-4;
   /// Start the camera's and every object's solve at its constant-velocity
   /// prediction (slam/motion_prediction.hpp) when the frame agrees with it at
   /// least as well as with the last pose, and associate the frame there.
@@ -424,6 +428,8 @@ struct SystemParams {
                     "camera_pyramid_levels must be in 1..6");
     detail::require(camera_converged_step >= 0 && std::isfinite(camera_converged_step), w,
                     "camera_converged_step must not be negative (0: off)");
+    detail::require(camera_converged_gain >= 0 && std::isfinite(camera_converged_gain), w,
+                    "camera_converged_gain must not be negative (0: off)");
     detail::require(depth_noise_reference >= S(0), w, "depth_noise_reference must not be negative");
     detail::require(likelihood.sigma > S(0) && likelihood.alpha >= S(0) && likelihood.alpha <= S(1) &&
                         likelihood.p_uniform >= S(0),

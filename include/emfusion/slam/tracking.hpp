@@ -114,10 +114,11 @@ SdfAlignmentParams<S> camera_alignment_params(const SystemParams<S>& params, int
 }
 
 /// The solver of the camera's solve: `solver` with camera_converged_step
-/// (with_converged_step: only a solver that has that stop changes).
+/// and camera_converged_gain (with_converged_step, with_converged_gain:
+/// only a solver that has those stops changes).
 template <class S, class Solver>
 Solver camera_solver(const Solver& solver, const SystemParams<S>& params) {
-  return with_converged_step(solver, params.camera_converged_step);
+  return with_converged_gain(with_converged_step(solver, params.camera_converged_step), params.camera_converged_gain);
 }
 
 /// Where a pose's solve may start: the pose of the last frame and, with

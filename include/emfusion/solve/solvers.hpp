@@ -16,7 +16,8 @@
 // max(1/3, 1 - (2 rho - 1)^3) after a success and by nu (doubling) after a
 // failure; it stops when |g|_inf <= eps1, when the step is below
 // eps2 (|xi(T)| + eps2), when the undamped step is below converged_step
-// (off in the reference), or after max_iterations linearisations. A solve
+// or a step gains too little (converged_gain; both off in the reference),
+// or after max_iterations linearisations. A solve
 // that starts near its solution (the finer levels of a coarse-to-fine solve)
 // may start less damped: refined(solver).
 #pragma once
@@ -41,6 +42,7 @@ enum class StopReason {
   too_few_terms,    ///< fewer than `min_terms` terms at the start: nothing to solve
   not_finite,       ///< the normal equations contained NaN or inf
   singular,         ///< the system could not be solved even with damping
+  gain_small,       ///< a step gained, or was expected to gain, too little (converged_gain): converged
 };
 
 inline const char* to_string(StopReason r) {
@@ -51,6 +53,7 @@ inline const char* to_string(StopReason r) {
     case StopReason::too_few_terms: return "too_few_terms";
     case StopReason::not_finite: return "not_finite";
     case StopReason::singular: return "singular";
+    case StopReason::gain_small: return "gain_small";
   }
   return "unknown";
 }
@@ -66,7 +69,7 @@ struct SolveReport {
   /// True when the solver stopped at a solution (not for lack of data).
   bool converged() const {
     return reason == StopReason::gradient_small || reason == StopReason::step_small ||
-           reason == StopReason::max_iterations;
+           reason == StopReason::max_iterations || reason == StopReason::gain_small;
   }
 };
 
@@ -89,13 +92,23 @@ struct LevenbergMarquardtParams {
   /// origin. 0 = off (the reference, which runs to eps2 or to the
   /// scalar's resolution).
   double converged_step = 0;
+  /// Converged when an accepted step lowered the cost (over the terms valid
+  /// before and after it) by at most this fraction of it, or when the next
+  /// step's own model expects no more than that: the cost function's
+  /// tolerance of other solvers. Unlike converged_step it ends the solve
+  /// where the cost is flat along a direction the data hardly observe (a
+  /// wall the camera may slide along), where the undamped step stays long
+  /// and each step, taken or refused, changes nothing. 0 = off (the
+  /// reference).
+  double converged_gain = 0;
   /// tau for a start already near the solution: refined(LevenbergMarquardt)
   /// solves with it (coarse-to-fine's finer levels). 0 = tau.
   double refine_tau = 0;
 
   /// Throws std::invalid_argument (prefixed with `where`) unless every value
   /// is in its range: max_iterations >= 0, tau > 0, nu > 1, the tolerances,
-  /// min_terms, min_damping, converged_step and refine_tau >= 0 (NaN fails).
+  /// min_terms, min_damping, converged_step, converged_gain and refine_tau
+  /// >= 0 (NaN fails).
   void validate(const char* where = "LevenbergMarquardtParams") const {
     detail::require(max_iterations >= 0, where, "lm max_iterations must not be negative");
     detail::require(tau > 0 && std::isfinite(tau), where, "lm tau must be positive and finite");
@@ -104,6 +117,8 @@ struct LevenbergMarquardtParams {
                     "lm eps1, eps2, min_terms and min_damping must not be negative");
     detail::require(converged_step >= 0 && std::isfinite(converged_step), where,
                     "lm converged_step must not be negative (0: off)");
+    detail::require(converged_gain >= 0 && std::isfinite(converged_gain), where,
+                    "lm converged_gain must not be negative (0: off)");
     detail::require(refine_tau >= 0 && std::isfinite(refine_tau), where, "lm refine_tau must not be negative (0: tau)");
   }
 };
@@ -215,6 +230,7 @@ struct LevenbergMarquardtIteration {
   double step_limit = -1;
   SolveReport report;
   bool started = false;  ///< the linearisation at the start was taken
+  bool refused = false;  ///< the last step proposed was refused (its damping raised since)
   bool done = false;
 
   EMF_HD static LevenbergMarquardtIteration at(const SE3<S>& start) {
@@ -244,13 +260,12 @@ struct LevenbergMarquardtIteration {
     ++report.iterations;
     // Predicted decrease of the quadratic model: xi^T (mu xi - g) / 2,
     // against the actual decrease over the terms valid at both poses.
-    double predicted = 0;
-    for (int i = 0; i < 6; ++i) predicted += xi[i] * (mu * xi[i] - n.g[i]);
-    predicted *= 0.5;
+    const double predicted = predicted_gain(xi);
     const double rho = detail::finite(at_target) && at_target.terms >= p.min_terms && predicted > 0
                            ? (at_target.shared_reference_cost - at_target.shared_cost) / predicted
                            : -1.0;
     if (rho > 0) {
+      const double gained = at_target.shared_reference_cost - at_target.shared_cost;
       pose = next;
       n = at_target;
       step_limit = -1;
@@ -261,14 +276,26 @@ struct LevenbergMarquardtIteration {
       const double floor = p.min_damping * detail::max_diagonal(n);
       mu = mu > floor ? mu : floor;
       nu = p.nu;
+      refused = false;
+      if (p.converged_gain > 0 && gained <= p.converged_gain * at_target.shared_reference_cost)
+        return finish(StopReason::gain_small);
     } else {
       mu *= nu;
       nu *= 2;
+      refused = true;
     }
     return propose(p);
   }
 
  private:
+  /// The decrease of the cost that the damped quadratic model at `pose`
+  /// predicts for step `step` (solved with the damping mu):
+  /// step^T (mu step - g) / 2.
+  EMF_HD double predicted_gain(const Vec6<double>& step) const {
+    double predicted = 0;
+    for (int i = 0; i < 6; ++i) predicted += step[i] * (mu * step[i] - n.g[i]);
+    return 0.5 * predicted;
+  }
   /// The next candidate from the current pose, or the reason to stop.
   EMF_HD bool propose(const LevenbergMarquardtParams& p) {
     if (report.iterations >= p.max_iterations) return finish();
@@ -277,6 +304,11 @@ struct LevenbergMarquardtIteration {
         norm(xi) <= p.converged_step)
       return finish(StopReason::step_small);
     if (!solve_damped(n, mu, xi)) return finish(StopReason::singular);
+    // After a refused step only: a start's heavy damping (the reference's
+    // tau 1e3) predicts little of its first steps without any step having
+    // failed.
+    if (p.converged_gain > 0 && refused && predicted_gain(xi) <= p.converged_gain * n.cost)
+      return finish(StopReason::gain_small);
     const double step = norm(xi);
     if (step <= detail::step_norm_limit_bound(pose.T, p.eps2)) {
       if (step_limit < 0) step_limit = detail::step_norm_limit(pose.T, p.eps2);
@@ -423,6 +455,15 @@ Solver refined(const Solver& solver) {
 template <class Solver>
 Solver with_converged_step(Solver solver, double step) {
   if constexpr (requires { solver.params.converged_step = step; }) solver.params.converged_step = step;
+  return solver;
+}
+
+/// `solver` with converged_gain = `gain` when it has that stop
+/// (LevenbergMarquardtParams::converged_gain; 0 turns it off), unchanged
+/// otherwise.
+template <class Solver>
+Solver with_converged_gain(Solver solver, double gain) {
+  if constexpr (requires { solver.params.converged_gain = gain; }) solver.params.converged_gain = gain;
   return solver;
 }
 
