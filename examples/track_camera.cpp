@@ -27,7 +27,7 @@
 // 0.01 cm on every sequence measured, the defaults at a third of the CPU
 // time (docs/decisions.md). The default solver also ends once a step lowers
 // the cost by at most --converged-gain of it (the system's
-// camera_converged_gain, 1e-4; 0: off).
+// camera_converged_gain, 3e-5; 0: off).
 // --store half keeps the volume's SDF and weight in 16 bits (core/half.hpp).
 // --huber and --truncation change the paper's 2 and 10 voxels;
 // --integrate-filtered fuses the bilateral-filtered depth instead of the raw
@@ -96,7 +96,7 @@ struct Options {
 /// The default solver: the system's (tau 1e-3, eps2 1e-6), converged once
 /// the undamped step is below 1e-5 (10 um, 0.0006 degrees), which eps2
 /// alone never says near the world's origin, where the sparse volume's
-/// frame sits, or once a step lowers the cost by at most 1e-4 of it: the
+/// frame sits, or once a step lowers the cost by at most 3e-5 of it: the
 /// system's camera solve (SystemParams::camera_converged_step and
 /// camera_converged_gain; docs/decisions.md).
 LevenbergMarquardtParams track_camera_lm() {

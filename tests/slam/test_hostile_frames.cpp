@@ -819,7 +819,7 @@ TEST_CASE("The camera's solve takes its own stride, pyramid and stop; objects ke
   REQUIRE(lm.params.converged_step == 0);
   REQUIRE(lm.params.converged_gain == 0);
   CHECK(camera_solver(lm, p).params.converged_step == 1e-5);
-  CHECK(camera_solver(lm, p).params.converged_gain == 1e-4);
+  CHECK(camera_solver(lm, p).params.converged_gain == 3e-5);
   CHECK(camera_solver(lm, p).params.tau == lm.params.tau);
   p.camera_converged_step = 0;
   p.camera_converged_gain = 0;

@@ -98,7 +98,7 @@ struct SystemParams {
   /// lm.converged_gain for the camera (0: off): its solve ends once a step
   /// lowers the cost by at most this fraction (docs/decisions.md, "The
   /// camera's solve ends where the cost stops falling").
-  double camera_converged_gain = 1e-4;
+  double camera_converged_gain = 3e-5;
   /// Start the camera's and every object's solve at its constant-velocity
   /// prediction (slam/motion_prediction.hpp) when the frame agrees with it at
   /// least as well as with the last pose, and associate the frame there.
