@@ -230,7 +230,6 @@ struct LevenbergMarquardtIteration {
   double step_limit = -1;
   SolveReport report;
   bool started = false;  ///< the linearisation at the start was taken
-  bool refused = false;  ///< the last step proposed was refused (its damping raised since)
   bool done = false;
 
   EMF_HD static LevenbergMarquardtIteration at(const SE3<S>& start) {
@@ -261,11 +260,10 @@ struct LevenbergMarquardtIteration {
     // Predicted decrease of the quadratic model: xi^T (mu xi - g) / 2,
     // against the actual decrease over the terms valid at both poses.
     const double predicted = predicted_gain(xi);
-    const double rho = detail::finite(at_target) && at_target.terms >= p.min_terms && predicted > 0
-                           ? (at_target.shared_reference_cost - at_target.shared_cost) / predicted
-                           : -1.0;
+    const double gained = at_target.shared_reference_cost - at_target.shared_cost;
+    const double rho =
+        detail::finite(at_target) && at_target.terms >= p.min_terms && predicted > 0 ? gained / predicted : -1.0;
     if (rho > 0) {
-      const double gained = at_target.shared_reference_cost - at_target.shared_cost;
       pose = next;
       n = at_target;
       step_limit = -1;
@@ -276,13 +274,11 @@ struct LevenbergMarquardtIteration {
       const double floor = p.min_damping * detail::max_diagonal(n);
       mu = mu > floor ? mu : floor;
       nu = p.nu;
-      refused = false;
       if (p.converged_gain > 0 && gained <= p.converged_gain * at_target.shared_reference_cost)
         return finish(StopReason::gain_small);
     } else {
       mu *= nu;
       nu *= 2;
-      refused = true;
     }
     return propose(p);
   }
@@ -304,9 +300,11 @@ struct LevenbergMarquardtIteration {
         norm(xi) <= p.converged_step)
       return finish(StopReason::step_small);
     if (!solve_damped(n, mu, xi)) return finish(StopReason::singular);
-    // After a refused step only: a start's heavy damping (the reference's
-    // tau 1e3) predicts little of its first steps without any step having
-    // failed.
+    // After a refused step only (nu grows past p.nu with each refusal and
+    // is p.nu again after a step taken): a start's heavy damping (the
+    // reference's tau 1e3) predicts little of its first steps without any
+    // step having failed.
+    const bool refused = nu > p.nu;
     if (p.converged_gain > 0 && refused && predicted_gain(xi) <= p.converged_gain * n.cost)
       return finish(StopReason::gain_small);
     const double step = norm(xi);
