@@ -132,6 +132,17 @@ HOLDOUT = [
     C('h235-tab600', '0:600', 235, 'book:box,bottle:cylinder,sports_ball:sphere:%s' % FAST, base='tab600'),
 ]
 
+# --fresh: a second held-out set, made when the first had been looked into (h234's car, the
+# forty-fourth session): run once on the code of the day it was made (the forty-fifth session,
+# docs/benchmarks.md) and then, like HOLDOUT, only to check a change that helped elsewhere.
+FRESH = [
+    S('h241', 300, 241, 'bottle:cylinder,car:toy_car,sports_ball:sphere,cup:mug'),
+    S('h242-fast450', 450, 242, 'book:box:%s,teddy_bear:sphere,donut:torus' % FAST),
+    S('h243-long600', 600, 243, 'cup:mug,car:toy_car,bottle:capsule,book:round_box', p_miss=0.2, p_fp=0.1),
+    C('h244-noisy', '0:300', 244, 'book:round_box,cup:mug,bottle:capsule', p_miss=0.3, p_fp=0.2),
+    C('h245-tab900', '0:900', 245, 'car:toy_car,teddy_bear:sphere:%s,book:box' % FAST, base='tab900'),
+]
+
 # --quick: short sequences that check the whole pipeline in minutes on a CPU (the third one
 # around the turn of a there-and-back base).
 QUICK = [
@@ -1475,10 +1486,12 @@ def main():
     ap.add_argument('--jobs', type=int, default=1, help='app runs in parallel (default 1)')
     ap.add_argument('--gen-jobs', type=int, default=min(os.cpu_count() or 1, 16),
                     help="processes for the generator's rendering (default: the cores, at most 16)")
-    ap.add_argument('--only', default=None, help='comma-separated sequence names (of the full, quick or held-out list)')
+    ap.add_argument('--only', default=None, help='comma-separated sequence names (of the full, quick or a held-out list)')
     ap.add_argument('--quick', action='store_true', help='the three short validation sequences only')
     ap.add_argument('--holdout', action='store_true',
                     help='the held-out sequences (HOLDOUT: never tuned on) instead of the main list')
+    ap.add_argument('--fresh', action='store_true',
+                    help='the second held-out set (FRESH, made in the forty-fifth session) instead of the main list')
     ap.add_argument('--to', default=None, help='export: the folder to copy the sequences to')
     ap.add_argument('--markdown', action='store_true', help='print the table as markdown')
     ap.add_argument('--json', default=None, help='also write the scored results to this file')
@@ -1500,10 +1513,10 @@ def main():
         return selftest()
     if args.step == 'compare':
         return compare(args.files)
-    seqs = QUICK if args.quick else HOLDOUT if args.holdout else SEQUENCES
+    seqs = QUICK if args.quick else HOLDOUT if args.holdout else FRESH if args.fresh else SEQUENCES
     if args.only:
         want = args.only.split(',')
-        known = {s['name']: s for s in SEQUENCES + QUICK + HOLDOUT}
+        known = {s['name']: s for s in SEQUENCES + QUICK + HOLDOUT + FRESH}
         missing = [w for w in want if w not in known]
         if missing:
             raise SystemExit('unknown sequence(s): %s (see the list step)' % ', '.join(missing))
