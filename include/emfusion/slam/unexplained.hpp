@@ -207,7 +207,8 @@ bool unambiguous(const std::vector<reidentification::CandidateFit<S>>& fits, dou
 /// the border was placed 24 cm off), or fits another lost object better
 /// than its own (on c214, on the H200, a mug coming back across the border
 /// was taken as a lost round box 48 cm away). refind_unexplained looks in
-/// such a group only while one lost object is looked for.
+/// such a group only while one lost object is looked for, and only from
+/// the lost objects' last orientations.
 inline bool cut_by_border(const std::vector<int>& group, int width, int height, int border) {
   std::size_t edge = 0;
   for (int i : group) {
@@ -346,7 +347,13 @@ bool hold_unexplained(const Map<S, B>& map, const Frame<S, B>& frame, const Syst
 /// group is left alone (unambiguous); otherwise the best fit with at least
 /// reidentify_min_inliers that the frame shows there (best_shown_fit,
 /// consistent_with_frame) brings its object back at the solved pose,
-/// tracked from the next frame. Not on detector frames, nor after another
+/// tracked from the next frame. In a group wholly in view, where that fit
+/// leaves doubt (none, or fewer than reidentify_turn_below of the points),
+/// the objects whose fit put at least reidentify_min_inliers of the points
+/// on their surfaces are aligned turned too (turned_fits, as on a
+/// detection), and a turned fit shown there that adds
+/// reidentify_keep_margin to the share wins: an object that turned while
+/// out of view. Not on detector frames, nor after another
 /// object came back this frame (the segmentation and the E-step do not show
 /// those). Its id is added to result.reidentified; returns how many came
 /// back. `workspace` (optional) keeps the image of marks between frames
@@ -391,25 +398,30 @@ int refind_unexplained(Map<S, B>& map, const Frame<S, B>& frame, const PinholeCa
   int found = 0;
   RaycastResult<S, B> drawn;
   for (const std::vector<int>& group : groups) {
+    const bool cut = detail::unexplained::cut_by_border(group, width, height, border);
     if (4 * group.size() > std::size_t(width) * std::size_t(height) || int(map.objects.size()) >= params.max_objects ||
-        (candidates.size() > 1 && detail::unexplained::cut_by_border(group, width, height, border)))
+        (candidates.size() > 1 && cut))
       continue;
     const auto target = detail::unexplained::target_of<S, B>(group, points, width, height, backend);
     const Vec3<S> centroid = map.T_world_camera * target.centroid;
     if (detail::unexplained::tried_before(ws.tried, centroid, group.size(), map.frames, candidates)) continue;
-    std::vector<detail::reidentification::CandidateFit<S>> fits;
-    for (std::size_t k = 0; k < map.lost.size(); ++k) {
-      if (!is_candidate(map.lost[k])) continue;
+    const auto frames_lost = [&](std::size_t k) { return std::max(map.frames - map.lost[k].lost_at, 1); };
+    // Its box centre can have gone refind_unexplained_speed times the time
+    // since it was last tracked.
+    const auto within_reach = [&](std::size_t k, const SE3<S>& T) {
       const ObjectModel<S, B>& o = *map.lost[k].object;
-      const auto [inliers, T] = detail::reidentification::fit_to_target(o, target, frame, map.T_world_camera, params,
-                                                                         norm, solver,
-                                                                         std::max(map.frames - map.lost[k].lost_at, 1));
-      // Its box centre can have gone refind_unexplained_speed times the
-      // time since it was last tracked.
       const Vec3<S> centre = S(0.5) * o.volume().view().extent();
       const double moved = double(emfusion::norm((map.T_world_camera * T.inverse()) * centre - o.volume().pose() * centre));
       const double seconds = std::max(now - map.record_of(o.id()).last_timestamp, 0.0);
-      if (moved <= double(params.refind_unexplained_speed) * seconds) fits.push_back({int(k), inliers, T});
+      return moved <= double(params.refind_unexplained_speed) * seconds;
+    };
+    std::vector<detail::reidentification::CandidateFit<S>> fits;
+    for (std::size_t k = 0; k < map.lost.size(); ++k) {
+      if (!is_candidate(map.lost[k])) continue;
+      const auto [inliers, T] = detail::reidentification::fit_to_target(*map.lost[k].object, target, frame,
+                                                                         map.T_world_camera, params, norm, solver,
+                                                                         frames_lost(k));
+      if (within_reach(k, T)) fits.push_back({int(k), inliers, T});
     }
     // The frame must show the fit in the group's pixels and, as far as no
     // live object covers it, wherever it is drawn: a model turned the wrong
@@ -420,10 +432,30 @@ int refind_unexplained(Map<S, B>& map, const Frame<S, B>& frame, const PinholeCa
                                                                f.T_volume_camera, frame, target.mask, camera, params,
                                                                drawn);
     };
-    const auto fit =
-        detail::unexplained::unambiguous(fits, params.reidentify_min_inliers, params.reidentify_keep_margin)
-            ? detail::reidentification::best_shown_fit(std::move(fits), params.reidentify_min_inliers, shown)
-            : std::nullopt;
+    const bool unambiguous =
+        detail::unexplained::unambiguous(fits, params.reidentify_min_inliers, params.reidentify_keep_margin);
+    auto fit = unambiguous ? detail::reidentification::best_shown_fit(fits, params.reidentify_min_inliers, shown)
+                           : std::nullopt;
+    // A group wholly in view that a lost object's fit from its last
+    // orientation leaves in doubt (fewer than reidentify_turn_below of the
+    // points, or not shown): the objects that fit at least
+    // reidentify_min_inliers of it are aligned turned too, as on a detection
+    // (turned_fits): an object that turned while out of view. On a group the
+    // border cuts every turn fits its part (twenty-fifth session).
+    if (!cut && unambiguous && params.reidentify_turn_below > 0 &&
+        !(fit && fit->inliers >= params.reidentify_turn_below)) {
+      std::vector<detail::reidentification::CandidateFit<S>> turned;
+      for (const auto& f : fits) {
+        if (f.inliers < params.reidentify_min_inliers) continue;
+        const std::size_t k = std::size_t(f.candidate);
+        for (const auto& [share, T] : detail::reidentification::turned_fits(
+                 *map.lost[k].object, target, frame, map.T_world_camera, params, norm, solver, frames_lost(k)))
+          if (within_reach(k, T)) turned.push_back({f.candidate, share, T});
+      }
+      const double to_beat =
+          std::max(params.reidentify_min_inliers, fit ? fit->inliers + params.reidentify_keep_margin : 0.0);
+      if (auto better = detail::reidentification::best_shown_fit(std::move(turned), to_beat, shown)) fit = better;
+    }
     if (!fit) {
       // Remembered, so that it is not fitted again until it changes.
       std::erase_if(ws.tried, [&](const auto& t) {
