@@ -677,12 +677,13 @@ TEMPLATE_LIST_TEST_CASE("A lost object that turned while out of view is found tu
                    l.T_was.translation() + vec3(S(0.03), S(0), S(0)));
   SystemParams<S> params = small_params<S>();
   params.sparse_background = false;
+  const Image<S, B> wall_depth = l.view_of(l.wall()).frame.depth;
   const auto found_where = [&](bool turned) -> std::optional<SE3<S>> {
     params.reidentify_turn_below = turned ? SystemParams<S>{}.reidentify_turn_below : 0;
     Map<S, B> map(params);
     Frame<S, B> frame;
     for (int k = 0; k < 3; ++k) {  // the background saw the wall alone
-      preprocess(l.view_of(l.wall()).frame.depth, l.camera, params, frame);
+      preprocess(wall_depth, l.camera, params, frame);
       integrate_models(map, frame, l.camera, params, {}, true);
     }
     map.started = true;
@@ -707,16 +708,15 @@ TEMPLATE_LIST_TEST_CASE("A lost object that turned while out of view is found tu
   // How far the box placed at a pose is from the box now, whichever of its
   // symmetries the pose takes: the largest distance from one of its corners
   // to the nearest corner of the box now.
-  const auto corners_off = [&](const SE3<S>& pose) {
+  const auto corner = [](int c) {  // corner c of the box in its own frame
     const Vec3<S> h = TurnedL<S, B>::book_half();
+    return Vec3<S>{c & 1 ? h.x() : -h.x(), c & 2 ? h.y() : -h.y(), c & 4 ? h.z() : -h.z()};
+  };
+  const auto corners_off = [&](const SE3<S>& pose) {
     double worst = 0;
     for (int c = 0; c < 8; ++c) {
-      const Vec3<S> corner{c & 1 ? h.x() : -h.x(), c & 2 ? h.y() : -h.y(), c & 4 ? h.z() : -h.z()};
       double nearest = 1e9;
-      for (int e = 0; e < 8; ++e) {
-        const Vec3<S> other{e & 1 ? h.x() : -h.x(), e & 2 ? h.y() : -h.y(), e & 4 ? h.z() : -h.z()};
-        nearest = std::min(nearest, double(norm(pose * corner - l.T_now * other)));
-      }
+      for (int e = 0; e < 8; ++e) nearest = std::min(nearest, double(norm(pose * corner(c) - l.T_now * corner(e))));
       worst = std::max(worst, nearest);
     }
     return worst;
