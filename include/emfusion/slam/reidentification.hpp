@@ -615,6 +615,14 @@ struct CandidateFit {
   SE3<S> T_volume_camera;
 };
 
+/// The share of the points a turned fit must have on the surface to
+/// replace `fit`, the best fit from the last orientation (or none):
+/// reidentify_min_inliers, and reidentify_keep_margin more than `fit`.
+template <class S>
+double turned_to_beat(const std::optional<CandidateFit<S>>& fit, const SystemParams<S>& params) {
+  return std::max(params.reidentify_min_inliers, fit ? fit->inliers + params.reidentify_keep_margin : 0.0);
+}
+
 /// best_shown_fit where the test may also change the fit: `accept(fit)`
 /// returns the fit to act on (the same, or one solved again from it:
 /// shown_or_colour_refined) or nothing; the first it returns one for, in
@@ -805,8 +813,7 @@ std::optional<NewObjectWeights<S, B>> reidentify(Map<S, B>& map, const Frame<S, 
       for (const auto& [inliers, T] : detail::reidentification::turned_fits(
                *map.lost[k].object, *target, frame, map.T_world_camera, params, norm, solver, frames_lost(k)))
         turned.push_back({int(k), inliers, T});
-    const double to_beat =
-        std::max(params.reidentify_min_inliers, fit ? fit->inliers + params.reidentify_keep_margin : 0.0);
+    const double to_beat = detail::reidentification::turned_to_beat(fit, params);
     if (auto better = detail::reidentification::best_accepted_fit(
             std::move(turned), to_beat, [&](const detail::reidentification::CandidateFit<S>& f) {
               bool refused = false;

@@ -452,8 +452,7 @@ int refind_unexplained(Map<S, B>& map, const Frame<S, B>& frame, const PinholeCa
                  *map.lost[k].object, target, frame, map.T_world_camera, params, norm, solver, frames_lost(k)))
           if (within_reach(k, T)) turned.push_back({f.candidate, share, T});
       }
-      const double to_beat =
-          std::max(params.reidentify_min_inliers, fit ? fit->inliers + params.reidentify_keep_margin : 0.0);
+      const double to_beat = detail::reidentification::turned_to_beat(fit, params);
       if (auto better = detail::reidentification::best_shown_fit(std::move(turned), to_beat, shown)) fit = better;
     }
     if (!fit) {
