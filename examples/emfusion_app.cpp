@@ -338,6 +338,8 @@ std::pair<double, double> median_p90(std::vector<double> v) {
 /// "object 3 (cup): created 12, lost 150, found_again 171 (in_view); tracked 270, refused 2, retried 1"
 /// (and ", moved on hidden 9" for an object that was hidden behind others,
 /// ", confirmed jumps 1" for one whose refused solves agreed: confirm_jump_frames,
+/// ", kept at start 2" for one whose solves slid where the frame saw through it:
+/// slide_seen_through_share,
 /// ", tracked back 29" for one whose trajectory holds poses of frames before
 /// it was created or found again: track_back_frames).
 void write_object_histories(Json& json, const ObjectHistories& histories, const std::vector<ObjectRecord>& records) {
@@ -355,10 +357,11 @@ void write_object_histories(Json& json, const ObjectHistories& histories, const 
       if (e.kind == ObjectEventKind::merged) line += fmt::format(" (into {})", e.other);
       if (e.kind == ObjectEventKind::absorbed) line += fmt::format(" (object {})", e.other);
     }
-    fmt::print("object {} ({}): {}; tracked {}, refused {}, retried {}{}{}{}\n", id, class_name,
+    fmt::print("object {} ({}): {}; tracked {}, refused {}, retried {}{}{}{}{}\n", id, class_name,
                line.empty() ? "no events" : line, h.tracked, h.refused, h.retried,
                h.moved_on > 0 ? fmt::format(", moved on hidden {}", h.moved_on) : std::string(),
                h.confirmed > 0 ? fmt::format(", confirmed jumps {}", h.confirmed) : std::string(),
+               h.kept_start > 0 ? fmt::format(", kept at start {}", h.kept_start) : std::string(),
                h.tracked_back > 0 ? fmt::format(", tracked back {}", h.tracked_back) : std::string());
   }
 }

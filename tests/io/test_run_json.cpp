@@ -124,7 +124,7 @@ TEST_CASE("run.json's object histories: counts, events and the deletion rule", "
   ObjectHistory h;
   h.id = 7;
   h.tracked = 40, h.refused = 2, h.moved_on = 3, h.retried = 1, h.from_prediction = 5, h.confirmed = 4;
-  h.tracked_back = 9;
+  h.tracked_back = 9, h.kept_start = 6;
   h.events = {{12, 0.4, ObjectEventKind::created, DeletionReason::none},
               {30, 1.0, ObjectEventKind::lost, DeletionReason::not_visible},
               {45, 1.5, ObjectEventKind::found_again, DeletionReason::none, 0, FoundBy::unexplained},
@@ -138,6 +138,7 @@ TEST_CASE("run.json's object histories: counts, events and the deletion rule", "
   CHECK(back.at("retried_frames").get<long long>() == 1);
   CHECK(back.at("from_prediction_frames").get<long long>() == 5);
   CHECK(back.at("confirmed_frames").get<long long>() == 4);
+  CHECK(back.at("kept_start_frames").get<long long>() == 6);
   CHECK(back.at("tracked_back_frames").get<long long>() == 9);
   const nlohmann::json& events = back.at("events");
   REQUIRE(events.size() == 4);

@@ -742,6 +742,10 @@ TEST_CASE("Hostile frames: the guards' parameters are validated", "[slam]") {
   for (const float bad : {-0.1f, 1.5f, float(NAN)})
     CHECK(error([bad](SystemParams<float>& p) { p.predict_hidden_share = bad; }).find("predict_hidden_share") !=
           std::string::npos);
+  CHECK(error([](SystemParams<float>& p) { p.slide_seen_through_share = 0; }).empty());  // off
+  for (const float bad : {-0.1f, 1.5f, float(NAN)})
+    CHECK(error([bad](SystemParams<float>& p) { p.slide_seen_through_share = bad; }).find("slide_seen_through_share") !=
+          std::string::npos);
   // The camera's own solve settings.
   CHECK(error([](SystemParams<float>& p) { p.camera_pixel_stride = 3; }).empty());
   CHECK(error([](SystemParams<float>& p) { p.camera_converged_step = 0; }).empty());  // off

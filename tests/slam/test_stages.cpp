@@ -19,6 +19,7 @@
 #include <cstdint>
 #include <random>
 #include <string>
+#include <tuple>
 #include <utility>
 #include <vector>
 
@@ -749,6 +750,58 @@ TEMPLATE_LIST_TEST_CASE("Stages alone: object_pose_prior holds an object's solve
   INFO("offset from the box after the solve: " << free << " m free, " << held << " m held");
   CHECK(free < 0.005);
   CHECK(held > 0.013);
+}
+
+TEMPLATE_LIST_TEST_CASE("Stages alone: a partly hidden object whose solve slid where the frame sees through it stays "
+                        "at its start",
+                        "[slam]", emfusion::test::HeavyConfigs) {
+  using S = typename TestType::Scalar;
+  using B = typename TestType::Backend;
+  // The box's model as a solve might leave it, 5 cm to the side of the box
+  // it was made from: a strip of it is drawn over the wall 0.8 m behind,
+  // which the frame shows through it, and no more of it agrees.
+  OneFrameMap<S, B> m;
+  REQUIRE(m.map.objects.size() == 1);
+  ObjectModel<S, B>& box = *m.map.objects[0];
+  const SE3<S> made = box.pose();
+  const SE3<S> aside = SE3<S>::translation(vec3(S(0.05), S(0), S(0))) * made;
+  const auto apart = [](const SE3<S>& a, const SE3<S>& b) { return double(norm(a.translation() - b.translation())); };
+  // Tracked from `start` to `solved`; returns the track and where the box is.
+  const auto check = [&](const SE3<S>& start, const SE3<S>& solved, bool hidden_in_part, TrackingOutcome outcome,
+                         S share) {
+    box.set_pose(solved);
+    SystemParams<S> params = m.s.params;
+    params.slide_seen_through_share = share;
+    std::vector<PoseTrack> tracks(1);
+    tracks[0].outcome = outcome;
+    const int kept = keep_starts_seen_through(m.map, m.frame, m.s.camera, params,
+                                              std::vector{PoseStarts<S>{start, std::nullopt}},
+                                              std::vector{hidden_in_part}, tracks);
+    CHECK(kept == int(tracks[0].kept_start));
+    return std::pair{tracks[0], box.pose()};
+  };
+  const S share = SystemParams<S>{}.slide_seen_through_share;
+  REQUIRE(share > S(0));
+  SECTION("slid aside, partly hidden: back at its start") {
+    const auto [track, pose] = check(made, aside, true, TrackingOutcome::tracked, share);
+    CHECK(track.kept_start);
+    CHECK(track.outcome == TrackingOutcome::tracked);
+    CHECK(apart(pose, made) < 1e-5);
+  }
+  SECTION("solved back onto the box from a start aside: taken") {
+    const auto [track, pose] = check(aside, made, true, TrackingOutcome::tracked, share);
+    CHECK_FALSE(track.kept_start);
+    CHECK(apart(pose, made) == 0);
+  }
+  SECTION("not partly hidden, not tracked, or off (0): the pose stays where the solve left it") {
+    for (const auto& [hidden, outcome, s] : {std::tuple{false, TrackingOutcome::tracked, share},
+                                             std::tuple{true, TrackingOutcome::jump_rejected, share},
+                                             std::tuple{true, TrackingOutcome::tracked, S(0)}}) {
+      const auto [track, pose] = check(made, aside, hidden, outcome, s);
+      CHECK_FALSE(track.kept_start);
+      CHECK(apart(pose, aside) == 0);
+    }
+  }
 }
 
 TEMPLATE_LIST_TEST_CASE(

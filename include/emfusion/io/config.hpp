@@ -205,6 +205,9 @@ const std::vector<ParameterEntry<S>>& parameter_table() {
       EMF_NUMBER("predict_hidden_share", predict_hidden_share,
                  "an object with this share of its drawn model behind nearer surfaces is associated and solved from "
                  "its constant-velocity prediction (0: off)"),
+      EMF_NUMBER("slide_seen_through_share", slide_seen_through_share,
+                 "a partly hidden object whose solve makes the frame see through this share more of its model, "
+                 "agreeing on less than half as many more pixels, stays at the solve's start (0: off)"),
       EMF_NUMBER("leaving_share", leaving_share,
                  "an object standing still of whose extent less than this share lies inside the image keeps its pose "
                  "instead of being tracked (0: off)"),

@@ -32,6 +32,7 @@ inline Json object_history_json(const ObjectHistory& history, const std::string&
   object["retried_frames"] = history.retried;
   object["from_prediction_frames"] = history.from_prediction;
   object["confirmed_frames"] = history.confirmed;
+  object["kept_start_frames"] = history.kept_start;
   object["tracked_back_frames"] = history.tracked_back;
   Json& events = object["events"] = Json::array();
   for (const ObjectEvent& e : history.events) {

@@ -98,6 +98,10 @@ struct PoseTrack {
   /// Refused by the motion bound but taken: the last of
   /// SystemParams::confirm_jump_frames refused solves that agree.
   bool confirmed = false;
+  /// Tracked, but at the pose its solve started from: the solved pose made
+  /// the frame see through the model (keep_starts_seen_through,
+  /// SystemParams::slide_seen_through_share).
+  bool kept_start = false;
 };
 
 /// The pixels of the depth image a frame received, by kind. Only `valid`
@@ -122,6 +126,7 @@ struct ObjectStatus {
   bool from_prediction = false;   ///< the solve taken started at the motion prediction (PoseTrack)
   int attempts = 0;               ///< solves run (2: retried from the other start)
   bool confirmed = false;         ///< refused by the motion bound, taken as confirmed (PoseTrack)
+  bool kept_start = false;        ///< left at its solve's start, the solved pose seen through (PoseTrack)
   int rendered_pixels = 0;        ///< rendered pixels inside the visibility border
   int associated_pixels = 0;      ///< pixels inside the border whose association to it exceeds 0.5
   int visible_pixels = 0;         ///< the larger of the two: what the visibility rule compares

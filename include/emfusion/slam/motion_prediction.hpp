@@ -17,6 +17,14 @@
 
 namespace emfusion {
 
+/// Where a pose's solve may start: the pose of the last frame and, with
+/// motion prediction, where the pose is expected now.
+template <class S>
+struct PoseStarts {
+  SE3<S> previous;
+  std::optional<SE3<S>> predicted;
+};
+
 /// The pose at `timestamp` if the motion from `before` to `last` goes on at
 /// the same velocity (in the body frame: turns are about the body's origin).
 /// The motion is scaled by the ratio of the time steps, clamped to

@@ -57,6 +57,9 @@ struct ObjectHistory {
   /// Frames its solve, refused by the motion bound, was taken as the last
   /// of refused solves that agree (SystemParams::confirm_jump_frames).
   int confirmed = 0;
+  /// Frames it was left at its solve's start because the frame saw through
+  /// it at the solved pose (SystemParams::slide_seen_through_share).
+  int kept_start = 0;
   /// Frames before its creation or return it was tracked back through
   /// (track_back_frames), all told.
   int tracked_back = 0;
@@ -80,6 +83,7 @@ class ObjectHistories {
       h.retried += s.attempts > 1;
       h.from_prediction += s.tracking == TrackingOutcome::tracked && s.from_prediction;
       h.confirmed += s.tracking == TrackingOutcome::tracked && s.confirmed;
+      h.kept_start += s.tracking == TrackingOutcome::tracked && s.kept_start;
     }
     for (int id : r.created) event(id, ObjectEventKind::created);
     for (std::size_t k = 0; k < r.reidentified.size(); ++k) {

@@ -285,6 +285,16 @@ struct SystemParams {
   /// 0 = off (docs/decisions.md, "Partly hidden objects start at their
   /// prediction").
   S predict_hidden_share = S(0.25);
+  /// A partly hidden object (predict_hidden_share) whose solve ends where
+  /// the frame sees through its model more than at the solve's start, by at
+  /// least this share of the model's pixels, and agrees with it on fewer
+  /// than half as many more pixels, stays at the start
+  /// (keep_starts_seen_through, lifecycle.hpp): what the nearer surface
+  /// leaves of it in view may fit the model slid along itself, as a
+  /// capsule hidden but for its top fits it pulled up its axis. 0 = off
+  /// (docs/decisions.md, "Partly hidden solves that the frame sees
+  /// through").
+  S slide_seen_through_share = S(0.05);
   /// An object (past its grace) that stands still (leaving_still) and of
   /// whose extent less than this share lies inside the image less the
   /// visibility border, as the camera now sees it at its last pose
@@ -456,6 +466,8 @@ struct SystemParams {
     detail::require(hidden_moving_seconds >= 0 && std::isfinite(double(hidden_moving_seconds)), w,
                     "hidden_moving_seconds must be finite and not negative");
     detail::require(leaving_share >= 0 && leaving_share <= 1, w, "leaving_share must be in [0, 1] (0: off)");
+    detail::require(slide_seen_through_share >= 0 && slide_seen_through_share <= 1, w,
+                    "slide_seen_through_share must be in [0, 1] (0: off)");
     detail::require(predict_hidden_share >= 0 && predict_hidden_share <= 1, w,
                     "predict_hidden_share must be in [0, 1] (0: off)");
     detail::require(leaving_still.translation >= 0 && leaving_still.rotation_degrees >= 0, w,

@@ -304,6 +304,10 @@ class System {
       for (const auto& h : held) skip.push_back(h.has_value());
       frame_.object_tracks = track_objects(map_, frame_, params_, parts_.object_norm, parts_.solver,
                                            &tracking_workspace_, &object_starts, &skip);
+      // Partly hidden objects whose solves slid where the frame sees
+      // through them stay at their starts.
+      keep_starts_seen_through(map_, frame_, camera_, params_, object_starts, hidden_in_part, frame_.object_tracks,
+                               &drawn_cover_workspace_);
       apply_holds(map_, held, frame_.object_tracks);
       for (const PoseTrack& t : frame_.object_tracks) result.objects.push_back(t.report);
       clock_.lap(result.times.track_objects);

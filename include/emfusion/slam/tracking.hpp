@@ -121,14 +121,6 @@ Solver camera_solver(const Solver& solver, const SystemParams<S>& params) {
   return with_converged_gain(with_converged_step(solver, params.camera_converged_step), params.camera_converged_gain);
 }
 
-/// Where a pose's solve may start: the pose of the last frame and, with
-/// motion prediction, where the pose is expected now.
-template <class S>
-struct PoseStarts {
-  SE3<S> previous;
-  std::optional<SE3<S>> predicted;
-};
-
 /// Solves one SDF alignment problem, `terms` (sdf_alignment_in_box's;
 /// poses are T_volume_camera), from `starts`: from the prediction when the
 /// frame agrees with it at least as well as with the previous pose
