@@ -14,7 +14,9 @@
 // in view to align, and objects hidden behind a nearer surface move on at
 // their velocity, instead of being tracked (all hold_decisions, which
 // System runs before tracking the objects, so that the held ones are not
-// solved).
+// solved). Partly hidden objects whose solves slid where the frame sees
+// through the model stay at their starts (keep_starts_seen_through, which
+// System runs right after tracking them).
 #pragma once
 
 #include <algorithm>
