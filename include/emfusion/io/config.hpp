@@ -223,6 +223,8 @@ const std::vector<ParameterEntry<S>>& parameter_table() {
                   "look for lost objects in what no model explains on every this many frames (0: off)"),
       EMF_NUMBER("refind_unexplained_sigmas", refind_unexplained_sigmas,
                  "unexplained: off the background's surface by more than this many likelihood sigmas"),
+      EMF_BOOL("refind_unexplained_across", refind_unexplained_across,
+               "unexplained: the background's SDF divided by its gradient's length where above 1 (grazing surfaces)"),
       EMF_NUMBER("refind_unexplained_speed", refind_unexplained_speed,
                  "... only as far from where an object was last tracked as this speed takes it (m/s)"),
       EMF_BOOL("hold_unexplained", hold_unexplained,

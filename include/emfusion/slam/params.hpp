@@ -333,6 +333,11 @@ struct SystemParams {
   int refind_unexplained_every = 1;
   /// ... where "off the surface" is further than this many likelihood.sigma.
   double refind_unexplained_sigmas = 2.0;
+  /// ... measured across the background's surface: its SDF divided by the
+  /// length of its gradient where that is above 1 (a surface seen at a
+  /// grazing angle holds distances along the rays, longer than across it
+  /// by about that factor). false: the SDF as stored.
+  bool refind_unexplained_across = true;
   /// ... and an object is looked for only as far from where it was last
   /// tracked as it can have gone at this speed (m/s).
   double refind_unexplained_speed = 1.0;

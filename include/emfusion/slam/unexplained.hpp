@@ -61,6 +61,7 @@ struct MarkUnexplained {
   SE3<S> T_volume_camera;
   int border;
   S tolerance;
+  bool across = false;  ///< SystemParams::refind_unexplained_across
   std::uint8_t* out;
 
   /// True where the ray through camera-frame point p, beyond p by more
@@ -85,9 +86,18 @@ struct MarkUnexplained {
     S sdf;
     if (points.inside_border(i, border) && segmentation[i] <= 0 && p.z() > S(0) &&
         background_association[i] >= S(0.99)) {
-      if (background.sample_observed(T_volume_camera * p, sdf))
-        mark = std::fabs(sdf) > tolerance ? 1 : 0;
-      else
+      const Vec3<S> x = T_volume_camera * p;
+      if (background.sample_observed(x, sdf)) {
+        // Across the surface: a grazing surface's stored distances run
+        // along the rays, longer by its gradient's length.
+        Vec3<S> g;
+        S stretch = S(1);
+        if (across && std::fabs(sdf) > tolerance && background.observed_gradient(x, g)) {
+          const S length = norm(g);
+          if (length > S(1)) stretch = length;
+        }
+        mark = std::fabs(sdf) > tolerance * stretch ? 1 : 0;
+      } else
         mark = in_front(p) ? 1 : 0;
     }
     out[i] = mark;
@@ -111,7 +121,7 @@ void mark_unexplained(const Map<S, B>& map, const Frame<S, B>& frame, const Syst
                                             background_association.view(), volume.view(),
                                             volume.pose().inverse() * map.T_world_camera, border,
                                             S(params.refind_unexplained_sigmas) * params.likelihood.sigma,
-                                            marked.view().data});
+                                            params.refind_unexplained_across, marked.view().data});
   });
 }
 
