@@ -723,6 +723,68 @@ TEMPLATE_LIST_TEST_CASE("Stages alone: a point in space the background never saw
     CHECK(box_marked < 0.05 * box);  // nothing seen behind it: new background
 }
 
+TEMPLATE_LIST_TEST_CASE("Stages alone: a floor seen at a grazing angle is not unexplained a little off its surface; "
+                        "a box above it is (refind_unexplained_across)",
+                        "[slam]", emfusion::test::HeavyConfigs) {
+  using S = typename TestType::Scalar;
+  using B = typename TestType::Backend;
+  // The background saw a floor 0.5 m below the camera, 1.5-3 m ahead at
+  // 10-18 degrees; the next frame measures it 1.5 cm higher (depth noise,
+  // a camera a little off), 6-9 cm nearer along those rays than the
+  // background's surface, and a box floating 0.25 m above it.
+  WallAndBox<S> s;
+  s.params.sparse_background = false;
+  const auto floor_at = [](S y) {
+    return sim::make_plane(sim::look_at(vec3(S(0), y, S(0)), Vec3<S>::zero(), vec3(S(0), S(0), S(1))));
+  };
+  sim::Scene<S> seen, now;
+  seen.add(floor_at(S(0.5)));
+  now.add(floor_at(S(0.485)));
+  now.add(sim::make_box(SE3<S>::translation(vec3(S(0), S(0.2), S(2.2))), vec3(S(0.1), S(0.05), S(0.1))));
+  const auto depth_of = [&](const sim::Scene<S>& scene, Image<int, Host>* labels) {
+    Image<S, Host> d;
+    sim::render_depth(scene, s.camera, SE3<S>::identity(), d, labels);
+    return d.template to<B>();
+  };
+  // The shares of the floor's pixels 1.5-3 m ahead and of the box's marked.
+  const auto marked_shares = [&](bool across) {
+    s.params.refind_unexplained_across = across;
+    Map<S, B> map(s.params);
+    Frame<S, B> frame;
+    preprocess(depth_of(seen, nullptr), s.camera, s.params, frame);
+    integrate_models(map, frame, s.camera, s.params, {}, true);
+    map.started = true;
+    Image<int, Host> labels;
+    preprocess(depth_of(now, &labels), s.camera, s.params, frame);
+    RenderWorkspace<S, B> workspace;
+    render_models(map, frame, s.camera, s.params, workspace);
+    PaperLikelihood<S> likelihood;
+    likelihood.params = s.params.likelihood;
+    associate(map, frame, likelihood, s.params);
+    Image<std::uint8_t, B> marked;
+    detail::unexplained::mark_unexplained(map, frame, s.params, 0, frame.associations.image(0), marked);
+    const std::vector<std::uint8_t> marks = marked.to_host();
+    const std::vector<int> shape = labels.to_host();
+    const std::vector<Vec3<S>> points = frame.points.to_host();
+    std::array<int, 4> n{};  // floor, floor marked, box, box marked
+    for (std::size_t i = 0; i < marks.size(); ++i) {
+      if (shape[i] == 1) ++n[2], n[3] += marks[i];
+      else if (shape[i] == 0 && points[i].z() > S(1.5) && points[i].z() < S(3)) ++n[0], n[1] += marks[i];
+    }
+    REQUIRE(n[0] > 300);
+    REQUIRE(n[2] > 100);
+    return std::pair{double(n[1]) / n[0], double(n[3]) / n[2]};
+  };
+  const auto [floor_along, box_along] = marked_shares(false);
+  const auto [floor_across, box_across] = marked_shares(true);
+  INFO("floor marked: " << floor_along << " along the rays, " << floor_across << " across; box " << box_along
+                        << " and " << box_across);
+  CHECK(floor_along > 0.5);    // the stored distances run along the rays
+  CHECK(floor_across < 0.05);  // across the surface they are within the tolerance
+  CHECK(box_along > 0.9);
+  CHECK(box_across > 0.9);     // what stands off the surface stays unexplained
+}
+
 TEMPLATE_LIST_TEST_CASE("Stages alone: object_pose_prior holds an object's solve at its start", "[slam]",
                         emfusion::test::HeavyConfigs) {
   using S = typename TestType::Scalar;
