@@ -336,8 +336,10 @@ struct SystemParams {
   /// ... measured across the background's surface: its SDF divided by the
   /// length of its gradient where that is above 1 (a surface seen at a
   /// grazing angle holds distances along the rays, longer than across it
-  /// by about that factor). false: the SDF as stored.
-  bool refind_unexplained_across = true;
+  /// by about that factor). false (the default): the SDF as stored
+  /// (docs/decisions.md, "Unexplained across the background's surface: off
+  /// by default").
+  bool refind_unexplained_across = false;
   /// ... and an object is looked for only as far from where it was last
   /// tracked as it can have gone at this speed (m/s).
   double refind_unexplained_speed = 1.0;
