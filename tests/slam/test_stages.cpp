@@ -655,6 +655,37 @@ TEMPLATE_LIST_TEST_CASE("Stages alone: while a lost object is looked for, the ba
   }
 }
 
+namespace {
+
+/// `scene`'s depth seen from the origin by `camera`, on backend B;
+/// `labels` (if given) gets the shape per pixel.
+template <class S, class B>
+Image<S, B> depth_from_origin(const sim::Scene<S>& scene, const PinholeCamera<S>& camera,
+                              Image<int, Host>* labels = nullptr) {
+  Image<S, Host> d;
+  sim::render_depth(scene, camera, SE3<S>::identity(), d, labels);
+  return d.template to<B>();
+}
+
+/// MarkUnexplained's marks of `depth` against `map`, read on the host:
+/// the frame preprocessed into `frame`, the models rendered, the E-step,
+/// then the marks over the whole image (no border).
+template <class S, class B>
+std::vector<std::uint8_t> unexplained_marks(Map<S, B>& map, const Image<S, B>& depth, const PinholeCamera<S>& camera,
+                                            const SystemParams<S>& params, Frame<S, B>& frame) {
+  preprocess(depth, camera, params, frame);
+  RenderWorkspace<S, B> workspace;
+  render_models(map, frame, camera, params, workspace);
+  PaperLikelihood<S> likelihood;
+  likelihood.params = params.likelihood;
+  associate(map, frame, likelihood, params);
+  Image<std::uint8_t, B> marked;
+  detail::unexplained::mark_unexplained(map, frame, params, 0, frame.associations.image(0), marked);
+  return marked.to_host();
+}
+
+}  // namespace
+
 TEMPLATE_LIST_TEST_CASE("Stages alone: a point in space the background never saw is unexplained only in front of a "
                         "surface it saw",
                         "[slam]", emfusion::test::HeavyConfigs) {
@@ -671,13 +702,8 @@ TEMPLATE_LIST_TEST_CASE("Stages alone: a point in space the background never saw
   wall.add(WallAndBox<S>::wall());
   boxed = wall;
   boxed.add(sim::make_box(SE3<S>::translation(vec3(S(0), S(0), S(1.5))), vec3(S(0.1), S(0.1), S(0.1))));
-  const auto depth_of = [&](const sim::Scene<S>& scene, Image<int, Host>* labels) {
-    Image<S, Host> d;
-    sim::render_depth(scene, s.camera, SE3<S>::identity(), d, labels);
-    return d.template to<B>();
-  };
   Frame<S, B> frame;
-  preprocess(depth_of(wall, nullptr), s.camera, s.params, frame);
+  preprocess(depth_from_origin<S, B>(wall, s.camera), s.camera, s.params, frame);
   integrate_models(map, frame, s.camera, s.params, {}, true);
   map.started = true;
   TsdfVolume<S, B>& volume = *map.background.dense();
@@ -696,15 +722,8 @@ TEMPLATE_LIST_TEST_CASE("Stages alone: a point in space the background never saw
   REQUIRE(emptied > 1000);
   volume.assign_from_host(sdf, weight);
   Image<int, Host> labels;
-  preprocess(depth_of(boxed, &labels), s.camera, s.params, frame);
-  RenderWorkspace<S, B> workspace;
-  render_models(map, frame, s.camera, s.params, workspace);
-  PaperLikelihood<S> likelihood;
-  likelihood.params = s.params.likelihood;
-  associate(map, frame, likelihood, s.params);
-  Image<std::uint8_t, B> marked;
-  detail::unexplained::mark_unexplained(map, frame, s.params, 0, frame.associations.image(0), marked);
-  const std::vector<std::uint8_t> marks = marked.to_host();
+  const std::vector<std::uint8_t> marks =
+      unexplained_marks(map, depth_from_origin<S, B>(boxed, s.camera, &labels), s.camera, s.params, frame);
   const std::vector<int> shape = labels.to_host();
   int box = 0, box_marked = 0, wall_marked = 0;
   for (std::size_t i = 0; i < marks.size(); ++i) {
@@ -741,29 +760,17 @@ TEMPLATE_LIST_TEST_CASE("Stages alone: a floor seen at a grazing angle is not un
   seen.add(floor_at(S(0.5)));
   now.add(floor_at(S(0.485)));
   now.add(sim::make_box(SE3<S>::translation(vec3(S(0), S(0.2), S(2.2))), vec3(S(0.1), S(0.05), S(0.1))));
-  const auto depth_of = [&](const sim::Scene<S>& scene, Image<int, Host>* labels) {
-    Image<S, Host> d;
-    sim::render_depth(scene, s.camera, SE3<S>::identity(), d, labels);
-    return d.template to<B>();
-  };
   // The shares of the floor's pixels 1.5-3 m ahead and of the box's marked.
   const auto marked_shares = [&](bool across) {
     s.params.refind_unexplained_across = across;
     Map<S, B> map(s.params);
     Frame<S, B> frame;
-    preprocess(depth_of(seen, nullptr), s.camera, s.params, frame);
+    preprocess(depth_from_origin<S, B>(seen, s.camera), s.camera, s.params, frame);
     integrate_models(map, frame, s.camera, s.params, {}, true);
     map.started = true;
     Image<int, Host> labels;
-    preprocess(depth_of(now, &labels), s.camera, s.params, frame);
-    RenderWorkspace<S, B> workspace;
-    render_models(map, frame, s.camera, s.params, workspace);
-    PaperLikelihood<S> likelihood;
-    likelihood.params = s.params.likelihood;
-    associate(map, frame, likelihood, s.params);
-    Image<std::uint8_t, B> marked;
-    detail::unexplained::mark_unexplained(map, frame, s.params, 0, frame.associations.image(0), marked);
-    const std::vector<std::uint8_t> marks = marked.to_host();
+    const std::vector<std::uint8_t> marks =
+        unexplained_marks(map, depth_from_origin<S, B>(now, s.camera, &labels), s.camera, s.params, frame);
     const std::vector<int> shape = labels.to_host();
     const std::vector<Vec3<S>> points = frame.points.to_host();
     std::array<int, 4> n{};  // floor, floor marked, box, box marked

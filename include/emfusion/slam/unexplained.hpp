@@ -49,8 +49,9 @@ inline constexpr int behind_steps = 20;
 /// observed that place (with `across`, the stored SDF divided by the length
 /// of its gradient where that exceeds 1: a surface seen at a grazing angle
 /// stores distances along the rays, longer than across it; x251's kitchen
-/// floor 2 m away held 3-5 cm a little off its surface). Where it has not, the point is unexplained only if
-/// it stands in front of a surface the background has observed (in_front):
+/// floor 2 m away held 3-5 cm a little off its surface). Where it has
+/// not, the point is unexplained only if it stands in front of a surface
+/// the background has observed (in_front):
 /// something in space a moving object hid before (on c215 of the
 /// generalisation benchmark, a lost bottle uncovered by a teddy bear
 /// walking away from in front of it). A place seen for the first time with
